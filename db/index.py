@@ -1,0 +1,263 @@
+"""The prebuilt k-d tree index: k nearest database poses for observed markers.
+
+Features are the 8 markers of each pose after `samba.alignment.align_markers` (24
+numbers, meters). The distance between an observation and a pose is the Euclidean
+distance between their features over the markers the observation has.
+
+Design, for 10^6 poses and sub-100-microsecond queries: the k-d tree (scipy `cKDTree`)
+holds a PCA projection of the features to `dims` dimensions. Projection onto an
+orthonormal basis never lengthens a vector, so a pose's projected distance is a lower
+bound of its true distance. A query takes `candidates` nearest poses from the tree,
+re-ranks them by true distance, and accepts the top k once the k-th true distance is no
+more than the largest projected distance fetched; otherwise it fetches more. Results
+are therefore exact, equal to brute force.
+
+An observation with missing markers is compared with features of the database poses
+computed by the same alignment with the same markers masked, so that the origin and
+heading agree; a tree for each such mask is built on first use and kept (the 8 masks of
+one missing marker are the common ones).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy
+from scipy.spatial import cKDTree
+
+from db.errors import QueryError, StoreError
+from samba.alignment import align_markers
+from samba.skeleton import N_MARKERS, markers_of
+
+FORMAT = 1
+DEFAULT_DIMS = 14
+LEAF_SIZE = 32
+MAX_MASK_TREES = 12
+APPROXIMATE_EPS = 0.75
+"""The eps of approximate queries that keeps recall@10 >= 0.99 at 10^6 poses (bench_db)."""
+
+
+@dataclass(frozen=True)
+class _Tree:
+    """A reduced-space k-d tree over the features of one marker mask."""
+
+    features: np.ndarray  # (n, 3 * present) float32, aligned markers present in the mask
+    mean: np.ndarray  # (3 * present,)
+    basis: np.ndarray  # (3 * present, dims), orthonormal columns
+    tree: cKDTree
+
+    @classmethod
+    def build(cls, features: np.ndarray, dims: int) -> _Tree:
+        features = np.ascontiguousarray(features, dtype=np.float32)
+        mean = features.mean(axis=0, dtype=np.float64)
+        centered = features - mean.astype(np.float32)
+        cov = (centered.T @ centered).astype(np.float64) / max(len(features), 1)
+        _, vectors = np.linalg.eigh(cov)
+        dims = min(dims, features.shape[1])
+        basis = np.ascontiguousarray(vectors[:, ::-1][:, :dims])
+        reduced = centered @ basis.astype(np.float32)
+        tree = cKDTree(
+            reduced.astype(np.float64), leafsize=LEAF_SIZE, balanced_tree=False, compact_nodes=False
+        )
+        return cls(features, mean, basis, tree)
+
+    def query(
+        self, f: np.ndarray, k: int, candidates: int, eps: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """k nearest of features f (b, D): distances (b, k), indices (b, k).
+
+        With eps == 0 the result is exact (fetching more candidates until certified);
+        with eps > 0 the tree search is approximate and one batch of candidates is used.
+        """
+        n = len(self.features)
+        z = (f - self.mean) @ self.basis
+        dist = np.empty((len(f), k))
+        idx = np.empty((len(f), k), dtype=np.int64)
+        todo = np.arange(len(f))
+        fetch = min(max(candidates, k), n)
+        while len(todo):
+            workers = -1 if len(todo) >= 256 else 1
+            bound, cand = self.tree.query(z[todo], k=fetch, eps=eps, workers=workers)
+            bound = bound.reshape(len(todo), fetch)
+            cand = cand.reshape(len(todo), fetch)
+            diff = self.features[cand] - f[todo, None, :].astype(np.float32)
+            true = np.sqrt(np.einsum("bkd,bkd->bk", diff, diff, dtype=np.float64))
+            order = np.argsort(true, axis=1, kind="stable")[:, :k]
+            best = np.take_along_axis(true, order, axis=1)
+            done = (best[:, -1] <= bound[:, -1]) | (fetch >= n) | (eps > 0)
+            dist[todo[done]] = best[done]
+            idx[todo[done]] = np.take_along_axis(cand, order, axis=1)[done]
+            todo = todo[~done]
+            fetch = min(fetch * 4, n)
+        return dist, idx
+
+
+class PoseIndex:
+    """k nearest database poses for marker observations; see the module docstring.
+
+    Build with `build(poses)`, persist with `save(path)` / `load(path, poses)`. `poses`
+    (n, 13, 3) stays referenced (it may be a memory map) for trees of masked markers.
+    """
+
+    def __init__(
+        self, poses: np.ndarray, full: _Tree, generation: str, dims: int, candidates: int
+    ) -> None:
+        self.poses = poses
+        self.generation = generation
+        self.dims = dims
+        self.candidates = candidates
+        self._full = full
+        self._masked: OrderedDict[int, _Tree] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    @property
+    def features(self) -> np.ndarray:
+        """Aligned marker features (n, 24) float32 of every pose, meters."""
+        return self._full.features
+
+    @classmethod
+    def build(
+        cls,
+        poses: np.ndarray,
+        generation: str = "",
+        dims: int = DEFAULT_DIMS,
+        candidates: int = 30,
+    ) -> PoseIndex:
+        """Index poses (n, 13, 3) in meters; `generation` names the store state indexed."""
+        if len(poses) == 0:
+            raise StoreError("index", "cannot index an empty pose set")
+        features = _features(poses, np.ones(N_MARKERS, dtype=bool))
+        return cls(poses, _Tree.build(features, dims), generation, dims, candidates)
+
+    def query(
+        self, markers: np.ndarray, k: int = 10, eps: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The k nearest poses to observations (b, 8, 3) or (8, 3), meters, NaN = missing.
+
+        `eps` = 0 gives the exact k nearest (equal to brute force); `eps` > 0 trades
+        exactness for speed (scipy's approximate k-d tree search with that eps; recall is
+        measured in `bench/bench_db.py`, APPROXIMATE_EPS is the tuned value). Returns
+        (distances, indices), each (b, k) or (k,) for a single observation:
+        feature distances in meters over the markers present, and row numbers in the
+        store's pose array, nearest first. Raises `QueryError` for a wrong shape, a bad
+        k or an observation without markers.
+        """
+        markers = np.asarray(markers, dtype=np.float64)
+        single = markers.ndim == 2
+        if single:
+            markers = markers[None]
+        if markers.ndim != 3 or markers.shape[1:] != (N_MARKERS, 3):
+            raise QueryError("markers", f"expected (8, 3) or (b, 8, 3), got {markers.shape}")
+        if not eps >= 0:
+            raise QueryError("eps", f"eps must be >= 0, got {eps}")
+        if not 1 <= k <= len(self):
+            raise QueryError("k", f"k must be in 1..{len(self)}, got {k}")
+        present = ~np.isnan(markers).any(axis=-1)
+        if not present.any(axis=1).all():
+            raise QueryError("markers", "an observation has no marker present")
+        masks = present @ (1 << np.arange(N_MARKERS))
+        aligned, _ = align_markers(markers)
+        dist = np.empty((len(markers), k))
+        idx = np.empty((len(markers), k), dtype=np.int64)
+        for mask in np.unique(masks):
+            rows = np.flatnonzero(masks == mask)
+            keep = present[rows[0]]
+            f = aligned[rows][:, keep].reshape(len(rows), -1)
+            tree = self._tree(int(mask), keep)
+            dist[rows], idx[rows] = tree.query(f, k, max(self.candidates, 2 * k), eps)
+        return (dist[0], idx[0]) if single else (dist, idx)
+
+    def _tree(self, mask: int, keep: np.ndarray) -> _Tree:
+        """The tree for a marker mask: the full one, or a cached masked one (LRU)."""
+        if keep.all():
+            return self._full
+        tree = self._masked.get(mask)
+        if tree is None:
+            tree = _Tree.build(_features(self.poses, keep), self.dims)
+            self._masked[mask] = tree
+            if len(self._masked) > MAX_MASK_TREES:
+                self._masked.popitem(last=False)
+        else:
+            self._masked.move_to_end(mask)
+        return tree
+
+    def save(self, path: str | Path) -> None:
+        """Write the index to `path` atomically (temp file + rename); no pickle inside."""
+        path = Path(path)
+        full = self._full
+        state = full.tree.__getstate__()
+        arrays = {
+            "format": np.array(FORMAT),
+            "generation": np.array(self.generation),
+            "scipy": np.array(scipy.__version__),
+            "dims": np.array(self.dims),
+            "candidates": np.array(self.candidates),
+            "features": full.features,
+            "mean": full.mean,
+            "basis": full.basis,
+            "tree_state": np.array(len(state)),
+        }
+        for i, item in enumerate(state):
+            if item is not None:
+                arrays[f"tree_{i}"] = np.asarray(item)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".index-", suffix=".npz")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez(fh, **arrays)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+    @classmethod
+    def load(cls, path: str | Path, poses: np.ndarray) -> PoseIndex | None:
+        """Read an index saved by `save` for `poses`; None if absent, unreadable or stale
+        for this scipy version or pose count (the caller rebuilds)."""
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                if int(data["format"]) != FORMAT or str(data["scipy"]) != scipy.__version__:
+                    return None
+                features = data["features"]
+                if len(features) != len(poses):
+                    return None
+                n_state = int(data["tree_state"])
+                state = tuple(
+                    _state_item(data[f"tree_{i}"]) if f"tree_{i}" in data else None
+                    for i in range(n_state)
+                )
+                tree = cKDTree.__new__(cKDTree)
+                tree.__setstate__(state)
+                full = _Tree(features, data["mean"], data["basis"], tree)
+                return cls(
+                    poses,
+                    full,
+                    str(data["generation"]),
+                    int(data["dims"]),
+                    int(data["candidates"]),
+                )
+        except (OSError, ValueError, KeyError, TypeError, EOFError):
+            return None
+
+
+def _state_item(value: np.ndarray) -> object:
+    return value.item() if value.ndim == 0 else value
+
+
+def _features(poses: np.ndarray, keep: np.ndarray, chunk: int = 200_000) -> np.ndarray:
+    """Aligned features (n, 3 * keep.sum()) float32 of poses with markers outside `keep` masked."""
+    out = np.empty((len(poses), 3 * int(keep.sum())), dtype=np.float32)
+    for start in range(0, len(poses), chunk):
+        markers = markers_of(np.asarray(poses[start : start + chunk], dtype=np.float64))
+        markers[:, ~keep] = np.nan
+        aligned, _ = align_markers(markers)
+        out[start : start + chunk] = aligned[:, keep].reshape(len(markers), -1)
+    return out

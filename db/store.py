@@ -1,0 +1,548 @@
+"""`PoseStore`: a directory holding a pose database that survives crashes.
+
+Layout of a store directory:
+
+* `catalog.sqlite`: the catalog (`db.catalog`): a row per take and the committed state.
+* `poses-<name>.f32`: every pose as float32 rows of 13 x 3 meters, memory-mapped.
+* `rows-<name>.i32`: per pose row, int32 (take id, frame number).
+* `index.npz`: the prebuilt k-d tree index (`db.index`), tagged with the generation.
+
+Writers hold an exclusive `flock` on `lock`. An import appends pose rows past the
+committed count, fsyncs, then commits the catalog rows and the new count in one SQLite
+transaction; rows past the committed count are garbage from an interrupted import and are
+cut off by the next writer. Deleting takes writes compacted data files under a new name
+and switches to them in one transaction. So a kill at any moment leaves the previous or
+the new state. A reader takes a snapshot when it opens (catalog rows in memory, the
+committed prefix of the data files mapped) and keeps it while writers go on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import os
+import sqlite3
+import time
+import uuid
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from db.catalog import (
+    FORMAT,
+    SCHEMA,
+    TakeInfo,
+    connect,
+    read_state,
+    read_takes,
+)
+from db.errors import StoreCorruptedError, StoreError
+from db.index import PoseIndex
+from samba.skeleton import N_JOINTS, mirror_poses
+from samba.take import Take
+
+CATALOG = "catalog.sqlite"
+INDEX = "index.npz"
+POSE_BYTES = N_JOINTS * 3 * 4
+ROW_BYTES = 2 * 4
+
+
+@dataclass(frozen=True)
+class AddResult:
+    """What `PoseStore.add` did: the new take ids (original, then mirror), or the id of
+    the take that already held the same content (`duplicate_of`)."""
+
+    take_ids: tuple[int, ...] = ()
+    frames_in: int = 0
+    frames_kept: int = 0
+    duplicate_of: int | None = None
+
+
+@dataclass
+class VerifyReport:
+    """Problems found by `PoseStore.verify` (empty when the store is sound) and notes."""
+
+    problems: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when no problem was found."""
+        return not self.problems
+
+
+def drop_near_duplicates(poses: np.ndarray, min_change: float) -> np.ndarray:
+    """Indices of the poses (n, 13, 3) to keep: a pose is kept when some joint moved more
+    than `min_change` meters since the last kept pose. The first pose is always kept."""
+    if min_change <= 0 or len(poses) == 0:
+        return np.arange(len(poses))
+    keep = [0]
+    last = poses[0]
+    for i in range(1, len(poses)):
+        if np.max(np.linalg.norm(poses[i] - last, axis=-1)) > min_change:
+            keep.append(i)
+            last = poses[i]
+    return np.array(keep)
+
+
+class PoseStore:
+    """A snapshot of a pose store directory, with the operations that change it.
+
+    `poses` (n, 13, 3) float32 meters, `take_ids` (n,) and `frames` (n,) int32 are the
+    snapshot taken when the store was opened (or last refreshed); `takes` lists the
+    catalog rows. Changing operations (`add`, `remove`, `label`) lock the store, commit,
+    and refresh this object's snapshot.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._index: PoseIndex | None = None
+        self.refresh()
+
+    # -- opening -------------------------------------------------------------------------
+
+    @classmethod
+    def create(cls, path: str | Path) -> PoseStore:
+        """Create an empty store at `path` (a new or empty directory) and open it."""
+        path = Path(path)
+        if (path / CATALOG).exists():
+            raise StoreError(str(path), "a pose store already exists here")
+        if path.exists() and (not path.is_dir() or any(path.iterdir())):
+            raise StoreError(str(path), "exists and is not an empty directory")
+        path.mkdir(parents=True, exist_ok=True)
+        tmp = path / f".{CATALOG}.{uuid.uuid4().hex}"
+        conn = connect(tmp)
+        try:
+            conn.executescript(SCHEMA)
+            now = datetime.now(UTC).isoformat(timespec="seconds")
+            state = {
+                "format": FORMAT,
+                "n_poses": "0",
+                "data_name": "0",
+                "generation": uuid.uuid4().hex,
+                "created": now,
+            }
+            conn.executemany("INSERT INTO state VALUES (?, ?)", state.items())
+        finally:
+            conn.close()
+        for name in ("poses-0.f32", "rows-0.i32"):
+            (path / name).touch()
+        _fsync_file(tmp)
+        os.replace(tmp, path / CATALOG)
+        _fsync_dir(path)
+        return cls(path)
+
+    @classmethod
+    def open(cls, path: str | Path) -> PoseStore:
+        """Open an existing store; raises `StoreError` when `path` holds none."""
+        path = Path(path)
+        if not (path / CATALOG).is_file():
+            raise StoreError(str(path), "no pose store here (create one with `samba db init`)")
+        return cls(path)
+
+    def refresh(self) -> None:
+        """Take a new snapshot of the committed state."""
+        for _ in range(20):
+            try:
+                self._load_snapshot()
+                return
+            except FileNotFoundError:
+                time.sleep(0.05)  # a writer switched data files between our reads
+        raise StoreError(str(self.path), "data files keep disappearing; is a writer looping?")
+
+    def _load_snapshot(self) -> None:
+        conn = self._connect()
+        try:
+            conn.execute("BEGIN")
+            state = read_state(conn)
+            takes = read_takes(conn)
+            conn.execute("COMMIT")
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(str(self.path / CATALOG), f"catalog unreadable: {exc}") from exc
+        finally:
+            conn.close()
+        if state.get("format") != FORMAT:
+            raise StoreError(str(self.path), f"unknown store format {state.get('format')!r}")
+        n = int(state["n_poses"])
+        name = state["data_name"]
+        poses_file = self.path / f"poses-{name}.f32"
+        rows_file = self.path / f"rows-{name}.i32"
+        for file, size in ((poses_file, POSE_BYTES), (rows_file, ROW_BYTES)):
+            if file.stat().st_size < n * size:
+                raise StoreError(str(file), f"shorter than the {n} committed poses: damaged")
+        if n:
+            self.poses = np.memmap(poses_file, dtype=np.float32, mode="r", shape=(n, N_JOINTS, 3))
+            rows = np.memmap(rows_file, dtype=np.int32, mode="r", shape=(n, 2))
+        else:
+            self.poses = np.empty((0, N_JOINTS, 3), dtype=np.float32)
+            rows = np.empty((0, 2), dtype=np.int32)
+        self.take_ids = rows[:, 0]
+        self.frames = rows[:, 1]
+        self.takes = takes
+        self.generation = state["generation"]
+        self.data_name = name
+        if self._index is not None and self._index.generation != self.generation:
+            self._index = None
+
+    def _connect(self) -> sqlite3.Connection:
+        try:
+            return connect(self.path / CATALOG)
+        except sqlite3.Error as exc:
+            raise StoreError(str(self.path / CATALOG), f"cannot open catalog: {exc}") from exc
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    # -- reading -------------------------------------------------------------------------
+
+    def take(self, ref: int | str) -> TakeInfo:
+        """A take by id or by name; raises `StoreError` if there is none (or several)."""
+        if isinstance(ref, int) or (isinstance(ref, str) and ref.isdigit()):
+            hits = [t for t in self.takes if t.id == int(ref)]
+        else:
+            hits = [t for t in self.takes if t.name == ref]
+        if len(hits) != 1:
+            problem = "no take" if not hits else f"{len(hits)} takes (use the id)"
+            raise StoreError(str(self.path), f"{problem} matching {ref!r}")
+        return hits[0]
+
+    def take_poses(self, ref: int | str) -> np.ndarray:
+        """The poses (frame_count, 13, 3) float32 of one take, meters."""
+        info = self.take(ref)
+        return np.asarray(self.poses[info.first_row : info.first_row + info.frame_count])
+
+    @property
+    def index(self) -> PoseIndex:
+        """The k-d tree index of this snapshot: loaded from disk, or rebuilt when stale."""
+        if self._index is None:
+            if len(self) == 0:
+                raise StoreError(str(self.path), "the store holds no poses to search")
+            index = PoseIndex.load(self.path / INDEX, self.poses)
+            if index is None or index.generation != self.generation:
+                index = PoseIndex.build(self.poses, generation=self.generation)
+                self._save_index_if_current(index)
+            self._index = index
+        return self._index
+
+    def index_is_fresh(self) -> bool:
+        """True when `index.npz` matches the committed state (no rebuild on open)."""
+        index = PoseIndex.load(self.path / INDEX, self.poses) if len(self) else None
+        return index is not None and index.generation == self.generation
+
+    def _save_index_if_current(self, index: PoseIndex) -> None:
+        with self._lock(blocking=False) as locked:
+            if locked and self._committed_generation() == index.generation:
+                index.save(self.path / INDEX)
+
+    def _committed_generation(self) -> str:
+        conn = self._connect()
+        try:
+            return read_state(conn)["generation"]
+        finally:
+            conn.close()
+
+    def query(
+        self, markers: np.ndarray, k: int = 10, eps: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """k nearest poses to markers (b, 8, 3) or (8, 3); see `PoseIndex.query`."""
+        return self.index.query(markers, k=k, eps=eps)
+
+    def stats(self) -> dict[str, object]:
+        """Counts and sizes: takes, poses, per-rig counts, bytes on disk."""
+        files = [p for p in self.path.iterdir() if p.is_file()]
+        by_rig: dict[str, int] = {}
+        for t in self.takes:
+            by_rig[t.rig] = by_rig.get(t.rig, 0) + t.frame_count
+        return {
+            "path": str(self.path),
+            "takes": len(self.takes),
+            "mirrored_takes": sum(t.mirrored for t in self.takes),
+            "poses": len(self),
+            "poses_by_rig": by_rig,
+            "seconds": round(sum(t.frame_count / t.fps for t in self.takes), 1),
+            "bytes_on_disk": sum(p.stat().st_size for p in files),
+            "index_fresh": self.index_is_fresh(),
+            "generation": self.generation,
+        }
+
+    # -- writing -------------------------------------------------------------------------
+
+    @contextlib.contextmanager
+    def _lock(self, blocking: bool = True) -> Iterator[bool]:
+        with open(self.path / "lock", "a+b") as fh:
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | (0 if blocking else fcntl.LOCK_NB))
+            except BlockingIOError:
+                yield False
+                return
+            try:
+                yield True
+            finally:
+                fcntl.flock(fh, fcntl.LOCK_UN)
+
+    @contextlib.contextmanager
+    def _writing(self, poses_change: bool = True) -> Iterator[sqlite3.Connection]:
+        """Lock the store, open a write transaction; commit and refresh on success.
+
+        With `poses_change` the commit gets a new generation, which makes the saved
+        index stale. Raising inside rolls everything back.
+        """
+        with self._lock():
+            conn = self._connect()
+            try:
+                conn.execute("BEGIN IMMEDIATE")
+                self._remove_orphans(read_state(conn))
+                yield conn
+                if poses_change:
+                    conn.execute(
+                        "UPDATE state SET value = ? WHERE key = 'generation'",
+                        (uuid.uuid4().hex,),
+                    )
+                conn.execute("COMMIT")
+            except BaseException:
+                if conn.in_transaction:
+                    conn.execute("ROLLBACK")
+                raise
+            finally:
+                conn.close()
+            self.refresh()
+
+    def _remove_orphans(self, state: dict[str, str]) -> None:
+        current = {f"poses-{state['data_name']}.f32", f"rows-{state['data_name']}.i32"}
+        for p in self.path.iterdir():
+            stale_data = p.name.startswith(("poses-", "rows-")) and p.name not in current
+            if stale_data or p.name.startswith((".index-", f".{CATALOG}.")):
+                p.unlink(missing_ok=True)
+
+    def add(
+        self,
+        take: Take,
+        mirror: bool = False,
+        min_change: float = 0.0,
+        build_index: bool = True,
+    ) -> AddResult:
+        """Import a take (and its left/right mirror when `mirror`); a no-op returning
+        `duplicate_of` when a take with the same content hash is already stored.
+
+        `min_change` (meters) drops near-duplicate consecutive poses. With
+        `build_index` the index is rebuilt and saved after the commit.
+        """
+        keep = drop_near_duplicates(take.poses, min_change)
+        poses = take.poses[keep]
+        frames = take.frames[keep]
+        variants = [(poses, False)] + ([(mirror_poses(poses), True)] if mirror else [])
+        try:
+            ids = self._add_variants(take, variants, frames)
+        except _DuplicateError as dup:
+            return AddResult(frames_in=len(take), duplicate_of=dup.take_id)
+        if build_index:
+            self.build_index()
+        return AddResult(take_ids=tuple(ids), frames_in=len(take), frames_kept=len(poses))
+
+    def _add_variants(
+        self, take: Take, variants: list[tuple[np.ndarray, bool]], frames: np.ndarray
+    ) -> list[int]:
+        with self._writing() as conn:
+            row = conn.execute(
+                "SELECT id FROM takes WHERE content_hash = ? AND mirrored = 0",
+                (take.content_hash,),
+            ).fetchone()
+            if row is not None:
+                raise _DuplicateError(row[0])
+            n = int(read_state(conn)["n_poses"])
+            now = datetime.now(UTC).isoformat(timespec="seconds")
+            ids: list[int] = []
+            first = n
+            for data, mirrored in variants:
+                data = np.ascontiguousarray(data, dtype=np.float32)
+                cur = conn.execute(
+                    "INSERT INTO takes (name, source, content_hash, mirrored, mirror_of, rig, "
+                    "subject, action, tags, fps, frame_count, source_frames, first_row, "
+                    "checksum, meta, warnings, added_at) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, '[]', ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        take.name + (" (mirrored)" if mirrored else ""),
+                        take.source,
+                        take.content_hash,
+                        int(mirrored),
+                        ids[0] if mirrored else None,
+                        take.rig,
+                        take.subject,
+                        take.action,
+                        take.fps,
+                        len(data),
+                        take.source_frames,
+                        first,
+                        _checksum(data),
+                        json.dumps(take.meta),
+                        json.dumps(take.warnings),
+                        now,
+                    ),
+                )
+                ids.append(int(cur.lastrowid))
+                first += len(data)
+            self._append_rows(n, variants, ids, frames)
+            conn.execute("UPDATE state SET value = ? WHERE key = 'n_poses'", (str(first),))
+        return ids
+
+    def _append_rows(
+        self,
+        n: int,
+        variants: list[tuple[np.ndarray, bool]],
+        ids: list[int],
+        frames: np.ndarray,
+    ) -> None:
+        poses_file = self.path / f"poses-{self.data_name}.f32"
+        rows_file = self.path / f"rows-{self.data_name}.i32"
+        with open(poses_file, "r+b") as pf, open(rows_file, "r+b") as rf:
+            pf.truncate(n * POSE_BYTES)
+            rf.truncate(n * ROW_BYTES)
+            pf.seek(n * POSE_BYTES)
+            rf.seek(n * ROW_BYTES)
+            for (data, _), take_id in zip(variants, ids, strict=True):
+                pf.write(np.ascontiguousarray(data, dtype=np.float32).tobytes())
+                rows = np.stack([np.full(len(data), take_id), frames], axis=1)
+                rf.write(rows.astype(np.int32).tobytes())
+            for fh in (pf, rf):
+                fh.flush()
+                os.fsync(fh.fileno())
+
+    def remove(self, refs: Sequence[int | str]) -> list[int]:
+        """Delete takes by id or name (a take's mirror goes with it); returns the ids
+        removed. Data files are compacted under a new name in the same commit."""
+        targets = {self.take(r).id for r in refs}
+        targets |= {t.id for t in self.takes if t.mirror_of in targets}
+        with self._writing() as conn:
+            takes = read_takes(conn)
+            missing = targets - {t.id for t in takes}
+            if missing:
+                raise StoreError(str(self.path), f"takes {sorted(missing)} were removed meanwhile")
+            keep = [t for t in takes if t.id not in targets]
+            name = str(int(read_state(conn)["data_name"]) + 1)
+            total = self._write_compacted(name, keep)
+            first = 0
+            for t in keep:
+                conn.execute("UPDATE takes SET first_row = ? WHERE id = ?", (first, t.id))
+                first += t.frame_count
+            conn.executemany("DELETE FROM takes WHERE id = ?", [(i,) for i in sorted(targets)])
+            conn.execute("UPDATE state SET value = ? WHERE key = 'n_poses'", (str(total),))
+            conn.execute("UPDATE state SET value = ? WHERE key = 'data_name'", (name,))
+        self._remove_orphans({"data_name": self.data_name})
+        if len(self):
+            self.build_index()
+        else:
+            (self.path / INDEX).unlink(missing_ok=True)
+        return sorted(targets)
+
+    def _write_compacted(self, name: str, keep: list[TakeInfo]) -> int:
+        poses_file = self.path / f"poses-{name}.f32"
+        rows_file = self.path / f"rows-{name}.i32"
+        rows = np.stack([self.take_ids, self.frames], axis=1)
+        total = 0
+        with open(poses_file, "wb") as pf, open(rows_file, "wb") as rf:
+            for t in keep:
+                pf.write(np.ascontiguousarray(self.poses[t.rows.start : t.rows.stop]).tobytes())
+                rf.write(np.ascontiguousarray(rows[t.rows.start : t.rows.stop]).tobytes())
+                total += t.frame_count
+            for fh in (pf, rf):
+                fh.flush()
+                os.fsync(fh.fileno())
+        _fsync_dir(self.path)
+        return total
+
+    def label(
+        self,
+        ref: int | str,
+        subject: str | None = None,
+        action: str | None = None,
+        tags: Sequence[str] | None = None,
+    ) -> TakeInfo:
+        """Set a take's subject, action and/or tags; returns the updated row."""
+        take_id = self.take(ref).id
+        with self._writing(poses_change=False) as conn:
+            for column, value in (("subject", subject), ("action", action)):
+                if value is not None:
+                    conn.execute(f"UPDATE takes SET {column} = ? WHERE id = ?", (value, take_id))
+            if tags is not None:
+                conn.execute(
+                    "UPDATE takes SET tags = ? WHERE id = ?",
+                    (json.dumps(sorted(set(tags))), take_id),
+                )
+        return self.take(take_id)
+
+    def build_index(self) -> PoseIndex:
+        """Build the index for the current snapshot and save it (under the lock)."""
+        index = PoseIndex.build(self.poses, generation=self.generation)
+        with self._lock():
+            if self._committed_generation() == self.generation:
+                index.save(self.path / INDEX)
+        self._index = index
+        return index
+
+    # -- checking ------------------------------------------------------------------------
+
+    def verify(self) -> VerifyReport:
+        """Check the catalog, the data files and the index against each other."""
+        report = VerifyReport()
+        conn = self._connect()
+        try:
+            result = conn.execute("PRAGMA integrity_check").fetchone()[0]
+        finally:
+            conn.close()
+        if result != "ok":
+            report.problems.append(f"catalog integrity check: {result}")
+        expected = 0
+        for t in sorted(self.takes, key=lambda t: t.first_row):
+            if t.first_row != expected:
+                report.problems.append(
+                    f"take {t.id} starts at row {t.first_row}, expected {expected}"
+                )
+            expected = t.first_row + t.frame_count
+            data = np.ascontiguousarray(self.poses[t.first_row : expected])
+            if len(data) != t.frame_count:
+                report.problems.append(f"take {t.id}: rows beyond the end of the data file")
+                continue
+            if _checksum(data) != t.checksum:
+                report.problems.append(f"take {t.id} ({t.name}): pose data checksum mismatch")
+            if not np.isfinite(data).all():
+                report.problems.append(f"take {t.id} ({t.name}): NaN or infinite poses")
+            if not (self.take_ids[t.first_row : expected] == t.id).all():
+                report.problems.append(f"take {t.id} ({t.name}): pose rows name another take")
+        if expected != len(self):
+            report.problems.append(f"takes cover {expected} rows but {len(self)} are committed")
+        if len(self) and not self.index_is_fresh():
+            report.notes.append("index is stale or missing; it is rebuilt on first query")
+        return report
+
+    def verify_or_raise(self) -> None:
+        """Raise `StoreCorruptedError` listing every problem `verify` finds."""
+        report = self.verify()
+        if not report.ok:
+            raise StoreCorruptedError(f"{self.path}: " + "; ".join(report.problems))
+
+
+class _DuplicateError(Exception):
+    def __init__(self, take_id: int) -> None:
+        super().__init__(take_id)
+        self.take_id = take_id
+
+
+def _checksum(data: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(data, dtype=np.float32).tobytes()).hexdigest()
+
+
+def _fsync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _fsync_dir(path: Path) -> None:
+    _fsync_file(path)

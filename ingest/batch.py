@@ -1,0 +1,91 @@
+"""Batch import of motion files into a pose store, continuing past bad files."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from tqdm import tqdm
+
+from db.store import PoseStore
+from ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.errors import SambaError
+
+SUFFIXES = (".bvh",)
+
+
+@dataclass
+class FileResult:
+    """The outcome of importing one file.
+
+    `status` is 'added', 'duplicate' (same content already stored) or 'failed'.
+    `frames_in` counts the source file's frames, `frames_kept` the poses stored (per take,
+    mirror not counted).
+    """
+
+    path: str
+    status: str
+    frames_in: int = 0
+    frames_kept: int = 0
+    rig: str = ""
+    take_ids: tuple[int, ...] = ()
+    warnings: list[str] = field(default_factory=list)
+    error: str = ""
+
+
+def expand_paths(paths: Iterable[str | Path]) -> list[Path]:
+    """Files named directly, plus every motion file found (recursively) in named folders.
+
+    A named path that does not exist is kept, so that its import fails with a clear error.
+    """
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            out.extend(sorted(f for f in p.rglob("*") if f.suffix.lower() in SUFFIXES))
+        else:
+            out.append(p)
+    return out
+
+
+def import_paths(
+    store: PoseStore,
+    paths: Iterable[str | Path],
+    options: BvhImportOptions | None = None,
+    mirror: bool = False,
+    min_change: float = 0.0,
+    progress: bool | None = None,
+) -> list[FileResult]:
+    """Import every file (folders are searched for .bvh files) into `store`.
+
+    Each file commits on its own, so a bad file or an interruption loses nothing already
+    imported; the index is rebuilt once at the end. `progress` None shows a bar on a
+    terminal only.
+    """
+    results: list[FileResult] = []
+    files = expand_paths(paths)
+    bar = tqdm(files, unit="file", disable=None if progress is None else not progress)
+    for path in bar:
+        bar.set_postfix_str(path.name, refresh=False)
+        try:
+            take = load_bvh_take(path, options)
+            added = store.add(take, mirror=mirror, min_change=min_change, build_index=False)
+        except SambaError as exc:
+            results.append(FileResult(str(path), "failed", error=str(exc)))
+            continue
+        status = "duplicate" if added.duplicate_of is not None else "added"
+        ids = (added.duplicate_of,) if added.duplicate_of is not None else added.take_ids
+        results.append(
+            FileResult(
+                str(path),
+                status,
+                frames_in=take.source_frames,
+                frames_kept=added.frames_kept,
+                rig=take.rig,
+                take_ids=ids,
+                warnings=list(take.warnings),
+            )
+        )
+    if any(r.status == "added" for r in results):
+        store.build_index()
+    return results

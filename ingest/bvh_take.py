@@ -1,0 +1,142 @@
+"""BVH file to `Take`: read, map the rig, resample, normalise to meters / +Y up / floor."""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ingest.bvh import parse_bvh
+from ingest.errors import BvhError
+from ingest.normalize import (
+    UNITS,
+    UP_AXES,
+    chirality,
+    detect_units,
+    detect_up,
+    floor_height,
+    leading_tpose_frames,
+    leg_length,
+    rotation_to_y_up,
+)
+from ingest.rigs import RigMap, map_rig
+from samba.kinematics import forward_kinematics, resample_times, sample_linear, sample_rotations
+from samba.take import Take
+
+_CMU_NAME = re.compile(r"(\d+)_(\d+)$")
+
+
+@dataclass(frozen=True)
+class BvhImportOptions:
+    """How to turn a BVH file into a take.
+
+    `fps`: the output rate (frames per second). `skip_frames`: leading source frames to
+    drop. `skip_tpose`: drop leading T-pose frames found by
+    `ingest.normalize.leading_tpose_frames` (otherwise they are kept with a warning).
+    `units`: 'auto' or a key of `ingest.normalize.UNITS`. `up`:
+    'auto' or a signed axis such as '+z'. `handedness`: 'auto' (mirror data whose knees
+    bend backwards), 'right' (keep) or 'left' (negate X). `rig`: a rig map, or None to
+    detect one. `subject` / `action`: catalog labels ('' derives the subject from CMU
+    style names such as 131_01).
+    """
+
+    fps: float = 30.0
+    skip_frames: int = 0
+    skip_tpose: bool = False
+    units: str = "auto"
+    up: str = "auto"
+    handedness: str = "auto"
+    rig: RigMap | None = None
+    subject: str = ""
+    action: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.fps > 0:
+            raise ValueError(f"--fps must be positive, got {self.fps}")
+        if self.skip_frames < 0:
+            raise ValueError(f"--skip-frames must be >= 0, got {self.skip_frames}")
+        if self.units != "auto" and self.units not in UNITS:
+            raise ValueError(
+                f"--units must be auto or one of {', '.join(UNITS)}, got {self.units!r}"
+            )
+        if self.up != "auto" and self.up not in UP_AXES:
+            raise ValueError(f"--up must be auto or one of {', '.join(UP_AXES)}, got {self.up!r}")
+        if self.handedness not in ("auto", "right", "left"):
+            raise ValueError(f"--handedness must be auto, right or left, got {self.handedness!r}")
+
+
+def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> Take:
+    """Read a BVH file of any supported rig as a `Take` of 13-joint poses in meters, +Y up.
+
+    Raises `BvhError` / `RigError` naming the file (and line) on bad input.
+    """
+    options = options or BvhImportOptions()
+    path = Path(path)
+    source = str(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise BvhError(source, f"cannot read file: {exc.strerror or exc}") from exc
+    bvh = parse_bvh(data, source=source)
+    rig, joints = map_rig(bvh.names, source, options.rig)
+    if options.skip_frames >= bvh.n_frames:
+        raise BvhError(
+            source, f"--skip-frames {options.skip_frames} drops all {bvh.n_frames} frames"
+        )
+    subset = bvh.ancestry(joints)
+    parents, rotations, translations = bvh.local_transforms(subset)
+    rotations = rotations[options.skip_frames :]
+    translations = translations[options.skip_frames :]
+    times = resample_times(len(rotations), bvh.fps, options.fps)
+    world = forward_kinematics(
+        parents, sample_rotations(rotations, times), sample_linear(translations, times)
+    )
+    positions = world[:, [subset.index(j) for j in joints]]
+
+    warnings: list[str] = []
+    units = detect_units(positions) if options.units == "auto" else options.units
+    positions = positions * UNITS[units]
+    up = detect_up(positions) if options.up == "auto" else options.up
+    positions = positions @ rotation_to_y_up(up).T
+    handedness = options.handedness
+    if handedness == "auto":
+        score = chirality(positions)
+        handedness = "left" if score < -0.5 else "right"
+        if handedness == "left":
+            warnings.append(f"knees bend backwards (chirality {score:+.2f}): mirrored X")
+    if handedness == "left":
+        positions[..., 0] *= -1.0
+    tpose = leading_tpose_frames(positions)
+    if tpose == len(positions):
+        tpose = 0
+    first = 0
+    if tpose and options.skip_tpose:
+        positions, first = positions[tpose:], tpose
+    elif tpose:
+        warnings.append(f"starts with {tpose} T-pose frame(s); --skip-tpose drops them")
+    positions[..., 1] -= floor_height(positions)
+    leg = leg_length(positions)
+    if not 0.4 <= leg <= 1.2:
+        warnings.append(f"leg length {leg:.2f} m is implausible: check --units (read as {units})")
+
+    subject = options.subject
+    match = _CMU_NAME.search(path.stem)
+    if not subject and match:
+        subject = str(int(match.group(1)))
+    return Take(
+        name=path.stem,
+        poses=positions,
+        fps=options.fps,
+        source=str(path.resolve()),
+        content_hash=hashlib.sha256(data).hexdigest(),
+        rig=rig.name,
+        subject=subject,
+        action=options.action,
+        frames=np.arange(first, first + len(positions)),
+        source_frames=bvh.n_frames,
+        warnings=warnings,
+        meta={"units": units, "up": up, "source_fps": f"{bvh.fps:.3f}", "handedness": handedness},
+    )

@@ -1,0 +1,11 @@
+"""Errors raised while reading and mapping foreign motion files."""
+
+from samba.errors import InputError
+
+
+class BvhError(InputError):
+    """A BVH file is malformed: the message names the file, the line and the problem."""
+
+
+class RigError(InputError):
+    """A skeleton cannot be mapped to the 13 joints, or a mapping file is invalid."""

@@ -1,0 +1,214 @@
+"""Rig maps: which joint of a foreign skeleton is each of Samba's 13 joints.
+
+Built-in maps cover the three rigs of the shared CMU data (cgspeed "3ds Max" names,
+Character Creator / iClone `CC_Base_*`, Daz/Poser `hip/abdomen/lThigh`) and the other
+rigs users commonly bring (cgspeed "MotionBuilder" names, Mixamo `mixamorig:*`,
+Unity / VRM humanoid names). Names match case-insensitively after dropping a namespace
+prefix such as `mixamorig:`. Anything else is mapped by a TOML file:
+
+    name = "my-rig"            # optional
+    [joints]
+    head = "Head"
+    l_shoulder = "L_UpperArm"
+    ...                        # all 13 joints of samba.skeleton.JOINT_NAMES
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from ingest.errors import RigError
+from samba.skeleton import JOINT_NAMES
+
+
+@dataclass(frozen=True)
+class RigMap:
+    """A named map from the 13 joints (in skeleton order) to accepted foreign joint names.
+
+    `joints[i]` lists the names accepted for joint i, best first.
+    """
+
+    name: str
+    joints: tuple[tuple[str, ...], ...]
+
+    def resolve(self, names: tuple[str, ...]) -> tuple[list[int], list[str]]:
+        """Indices into `names` of the 13 joints, and the joints that could not be found."""
+        lookup: dict[str, int] = {}
+        for i, n in enumerate(names):
+            lookup.setdefault(_plain(n), i)
+        found, missing = [], []
+        for ours, candidates in zip(JOINT_NAMES, self.joints, strict=True):
+            hit = next((lookup[_plain(c)] for c in candidates if _plain(c) in lookup), None)
+            if hit is None:
+                missing.append(f"{ours} (looked for {' / '.join(candidates)})")
+            else:
+                found.append(hit)
+        return found, missing
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> RigMap:
+        """Read a user mapping file; raises `RigError` naming the file and the problem."""
+        path = Path(path)
+        try:
+            doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise RigError(str(path), f"cannot read mapping file: {exc.strerror or exc}") from exc
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise RigError(str(path), f"not valid TOML: {exc}") from exc
+        table = doc.get("joints")
+        if not isinstance(table, dict):
+            raise RigError(str(path), "needs a [joints] table mapping our 13 joints to names")
+        unknown = sorted(set(table) - set(JOINT_NAMES))
+        if unknown:
+            raise RigError(str(path), f"unknown joints {unknown}; ours are {list(JOINT_NAMES)}")
+        absent = [j for j in JOINT_NAMES if j not in table]
+        if absent:
+            raise RigError(str(path), f"[joints] does not map {', '.join(absent)}")
+        joints = []
+        for j in JOINT_NAMES:
+            value = table[j]
+            options = (value,) if isinstance(value, str) else tuple(value)
+            if not options or not all(isinstance(v, str) and v for v in options):
+                raise RigError(str(path), f"joint {j} must map to a name or a list of names")
+            joints.append(options)
+        name = doc.get("name", path.stem)
+        return cls(name=str(name), joints=tuple(joints))
+
+
+def _plain(name: str) -> str:
+    return name.rsplit(":", 1)[-1].replace(" ", "").replace("_", "").lower()
+
+
+def _rig(name: str, head: str, pairs: list[tuple[str, str]]) -> RigMap:
+    """A rig from the head name and (left, right) names, shoulder to foot; '|' separates options."""
+    joints: list[tuple[str, ...]] = [tuple(head.split("|"))]
+    for left, right in pairs:
+        joints.append(tuple(left.split("|")))
+        joints.append(tuple(right.split("|")))
+    return RigMap(name=name, joints=tuple(joints))
+
+
+BUILTIN_RIGS: tuple[RigMap, ...] = (
+    _rig(
+        "cmu-max",
+        "Head",
+        [
+            ("LeftShoulder", "RightShoulder"),
+            ("LeftElbow", "RightElbow"),
+            ("LeftWrist", "RightWrist"),
+            ("LeftHip", "RightHip"),
+            ("LeftKnee", "RightKnee"),
+            ("LeftAnkle", "RightAnkle"),
+        ],
+    ),
+    _rig(
+        "iclone",
+        "CC_Base_Head",
+        [
+            ("CC_Base_L_Upperarm", "CC_Base_R_Upperarm"),
+            ("CC_Base_L_Forearm", "CC_Base_R_Forearm"),
+            ("CC_Base_L_Hand", "CC_Base_R_Hand"),
+            ("CC_Base_L_Thigh", "CC_Base_R_Thigh"),
+            ("CC_Base_L_Calf", "CC_Base_R_Calf"),
+            ("CC_Base_L_Foot", "CC_Base_R_Foot"),
+        ],
+    ),
+    _rig(
+        "daz",
+        "head",
+        [
+            ("lShldr|lShldrBend", "rShldr|rShldrBend"),
+            ("lForeArm|lForearmBend", "rForeArm|rForearmBend"),
+            ("lHand", "rHand"),
+            ("lThigh|lThighBend", "rThigh|rThighBend"),
+            ("lShin", "rShin"),
+            ("lFoot", "rFoot"),
+        ],
+    ),
+    _rig(
+        "mixamo",
+        "mixamorig:Head",
+        [
+            ("mixamorig:LeftArm", "mixamorig:RightArm"),
+            ("mixamorig:LeftForeArm", "mixamorig:RightForeArm"),
+            ("mixamorig:LeftHand", "mixamorig:RightHand"),
+            ("mixamorig:LeftUpLeg", "mixamorig:RightUpLeg"),
+            ("mixamorig:LeftLeg", "mixamorig:RightLeg"),
+            ("mixamorig:LeftFoot", "mixamorig:RightFoot"),
+        ],
+    ),
+    _rig(
+        "motionbuilder",
+        "Head",
+        [
+            ("LeftArm", "RightArm"),
+            ("LeftForeArm", "RightForeArm"),
+            ("LeftHand", "RightHand"),
+            ("LeftUpLeg", "RightUpLeg"),
+            ("LeftLeg", "RightLeg"),
+            ("LeftFoot", "RightFoot"),
+        ],
+    ),
+    _rig(
+        "humanoid",
+        "Head",
+        [
+            ("LeftUpperArm", "RightUpperArm"),
+            ("LeftLowerArm", "RightLowerArm"),
+            ("LeftHand", "RightHand"),
+            ("LeftUpperLeg", "RightUpperLeg"),
+            ("LeftLowerLeg", "RightLowerLeg"),
+            ("LeftFoot", "RightFoot"),
+        ],
+    ),
+)
+"""Built-in rigs, tried in this order by `detect_rig`."""
+
+
+def rig_by_name(name: str) -> RigMap:
+    """A built-in rig by its name; raises `RigError` listing the known names."""
+    for rig in BUILTIN_RIGS:
+        if rig.name == name:
+            return rig
+    known = ", ".join(r.name for r in BUILTIN_RIGS)
+    raise RigError("--rig", f"unknown rig {name!r}; built-in rigs are {known}")
+
+
+def detect_rig(names: tuple[str, ...], source: str) -> tuple[RigMap, list[int]]:
+    """The first built-in rig that maps all 13 joints, with the joint indices into `names`.
+
+    Mixamo is only chosen when the names carry the `mixamorig` prefix, since after the
+    prefix its names equal MotionBuilder's. Raises `RigError` naming `source` and the
+    joints the closest rig could not find.
+    """
+    mixamo = any(n.lower().startswith("mixamorig") for n in names)
+    best: tuple[int, RigMap, list[str]] | None = None
+    for rig in BUILTIN_RIGS:
+        if (rig.name == "mixamo") != mixamo and rig.name in ("mixamo", "motionbuilder"):
+            continue
+        found, missing = rig.resolve(names)
+        if not missing:
+            return rig, found
+        if best is None or len(missing) < best[0]:
+            best = (len(missing), rig, missing)
+    assert best is not None
+    _, rig, missing = best
+    raise RigError(
+        source,
+        f"unknown rig: could not map {len(missing)} of 13 joints (closest built-in rig "
+        f"{rig.name!r} lacks {'; '.join(missing)}); pass a mapping file with --map",
+    )
+
+
+def map_rig(
+    names: tuple[str, ...], source: str, rig: RigMap | None = None
+) -> tuple[RigMap, list[int]]:
+    """Indices into `names` of the 13 joints, by `rig` when given, else by detection."""
+    if rig is None:
+        return detect_rig(names, source)
+    found, missing = rig.resolve(names)
+    if missing:
+        raise RigError(source, f"rig {rig.name!r} cannot map: {'; '.join(missing)}")
+    return rig, found

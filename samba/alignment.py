@@ -1,0 +1,118 @@
+"""Canonical alignment of marker sets, shared by the pose index and the reconstruction.
+
+An observation of the 8 markers is moved into the database frame by
+
+    p_canonical = scale * R_y(yaw) @ (p_world - origin)
+
+where `origin` is the centroid of the markers present, `yaw` turns the subject about +Y
+so that its left-right line points along +X (the subject faces +Z), and `scale`
+optionally brings the tibia (knee-to-foot) length to `REFERENCE_TIBIA`. The left-right
+line comes from the first complete marker pair in `HEADING_PAIRS` (shoulders, then knees,
+feet, wrists); with no complete pair, yaw is 0.
+
+Everything here is computable from the 8 markers alone and works with missing markers
+(NaN): applying the same function to database poses with the same markers masked gives
+features that are directly comparable to an observation's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from samba.skeleton import N_MARKERS
+
+HEADING_PAIRS: tuple[tuple[int, int], ...] = ((0, 1), (4, 5), (6, 7), (2, 3))
+"""(left, right) marker pairs tried in order for the heading: shoulders, knees, feet, wrists."""
+TIBIA_PAIRS: tuple[tuple[int, int], ...] = ((4, 6), (5, 7))
+"""(knee, foot) marker index pairs whose lengths give the tibia."""
+REFERENCE_TIBIA = 0.45
+"""Tibia length in meters that scale-normalised features are brought to."""
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """A batch of world-to-canonical transforms, one per observation.
+
+    `origin` (n, 3) meters, `yaw` (n,) radians about +Y, `scale` (n,) dimensionless.
+    Build one with `from_markers`; move points with `apply` (world to canonical) and
+    `invert` (canonical to world). Observations with no marker present get a NaN origin.
+    """
+
+    origin: np.ndarray
+    yaw: np.ndarray
+    scale: np.ndarray
+
+    @classmethod
+    def from_markers(cls, markers: np.ndarray, scale_by_tibia: bool = False) -> Alignment:
+        """The alignment of marker sets (n, 8, 3) in meters, NaN for missing markers."""
+        markers = _as_batch(markers)
+        present = ~np.isnan(markers).any(axis=-1)
+        count = present.sum(axis=1)
+        summed = np.where(present[..., None], markers, 0.0).sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            origin = summed / count[:, None]
+        yaw = np.zeros(len(markers))
+        undecided = np.ones(len(markers), dtype=bool)
+        for left, right in HEADING_PAIRS:
+            usable = undecided & present[:, left] & present[:, right]
+            line = markers[usable, left] - markers[usable, right]
+            yaw[usable] = np.arctan2(line[:, 2], line[:, 0])
+            undecided &= ~usable
+        scale = np.ones(len(markers))
+        if scale_by_tibia:
+            lengths = np.stack(
+                [np.linalg.norm(markers[:, k] - markers[:, f], axis=-1) for k, f in TIBIA_PAIRS],
+                axis=1,
+            )
+            known = ~np.isnan(lengths)
+            n_known = known.sum(axis=1)
+            mean = np.where(known, lengths, 0.0).sum(axis=1) / np.maximum(n_known, 1)
+            ok = (n_known > 0) & (mean > 1e-6)
+            scale[ok] = REFERENCE_TIBIA / mean[ok]
+        return cls(origin=origin, yaw=yaw, scale=scale)
+
+    def __len__(self) -> int:
+        return len(self.yaw)
+
+    def _rotation(self) -> np.ndarray:
+        c, s = np.cos(self.yaw), np.sin(self.yaw)
+        rot = np.zeros((len(self.yaw), 3, 3))
+        rot[:, 0, 0] = c
+        rot[:, 0, 2] = s
+        rot[:, 1, 1] = 1.0
+        rot[:, 2, 0] = -s
+        rot[:, 2, 2] = c
+        return rot
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """World points (n, m, 3) to the canonical frame (n, m, 3); NaN stays NaN."""
+        points = np.asarray(points, dtype=np.float64)
+        moved = points - self.origin[:, None, :]
+        return self.scale[:, None, None] * np.einsum("nij,nmj->nmi", self._rotation(), moved)
+
+    def invert(self, points: np.ndarray) -> np.ndarray:
+        """Canonical points (n, m, 3) back to the world frame (n, m, 3)."""
+        points = np.asarray(points, dtype=np.float64) / self.scale[:, None, None]
+        return np.einsum("nji,nmj->nmi", self._rotation(), points) + self.origin[:, None, :]
+
+
+def align_markers(
+    markers: np.ndarray, scale_by_tibia: bool = False
+) -> tuple[np.ndarray, Alignment]:
+    """Markers (n, 8, 3) or (8, 3) in the canonical frame, same shape, with their `Alignment`."""
+    markers = np.asarray(markers, dtype=np.float64)
+    batch = _as_batch(markers)
+    alignment = Alignment.from_markers(batch, scale_by_tibia=scale_by_tibia)
+    aligned = alignment.apply(batch)
+    return (aligned[0] if markers.ndim == 2 else aligned), alignment
+
+
+def _as_batch(markers: np.ndarray) -> np.ndarray:
+    markers = np.asarray(markers, dtype=np.float64)
+    if markers.ndim == 2:
+        markers = markers[None]
+    if markers.ndim != 3 or markers.shape[1:] != (N_MARKERS, 3):
+        raise ValueError(f"markers must be (n, 8, 3) or (8, 3), got {markers.shape}")
+    return markers

@@ -1,0 +1,52 @@
+"""The `samba` console command: one entry point, a subcommand per area.
+
+Each area registers its subcommands from its own package; the table below names the
+module that does so, imported only when needed. A `SambaError` is printed as one line
+on stderr with exit status 1; wrong flags exit with status 2 (argparse).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from samba.errors import SambaError
+
+AREAS: dict[str, tuple[str, str]] = {
+    "db": ("ingest.cli", "pose database: init, import, ls, show, label, rm, verify, stats, query"),
+    "demo": ("db.demo", "build a database from built-in synthetic motions and query it"),
+}
+"""Subcommand -> (module with `register(parser)`, one-line help)."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser with every area's subcommands."""
+    parser = argparse.ArgumentParser(
+        prog="samba",
+        description="Samba: low-cost real-time motion capture from eight markers.",
+    )
+    sub = parser.add_subparsers(dest="area", required=True, metavar="COMMAND")
+    for name, (module, help_text) in AREAS.items():
+        area = sub.add_parser(name, help=help_text, description=help_text)
+        importlib.import_module(module).register(area)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except SambaError as exc:
+        print(f"samba: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("samba: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

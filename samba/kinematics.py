@@ -1,0 +1,82 @@
+"""Forward kinematics and rotation interpolation for joint hierarchies, batched over frames.
+
+Rotations are unit quaternions in scalar-last order (x, y, z, w), as in
+`scipy.spatial.transform.Rotation`. A hierarchy is given by `parents`, the parent index
+of each joint (-1 for a root), with every parent listed before its children.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def forward_kinematics(
+    parents: np.ndarray, rotations: np.ndarray, translations: np.ndarray
+) -> np.ndarray:
+    """Global joint positions from local transforms.
+
+    `rotations` (n, J, 4) are local joint rotations (quaternions), `translations`
+    (n, J, 3) local joint positions in the parent's frame (for a root: in the world), in
+    any length unit. Returns (n, J, 3) world positions in that unit.
+    """
+    n, n_joints = rotations.shape[:2]
+    local = Rotation.from_quat(rotations.reshape(-1, 4)).as_matrix().reshape(n, n_joints, 3, 3)
+    world_rot = np.empty_like(local)
+    world_pos = np.empty((n, n_joints, 3))
+    for j, p in enumerate(parents):
+        if p < 0:
+            world_rot[:, j] = local[:, j]
+            world_pos[:, j] = translations[:, j]
+        else:
+            world_rot[:, j] = world_rot[:, p] @ local[:, j]
+            world_pos[:, j] = world_pos[:, p] + np.einsum(
+                "nij,nj->ni", world_rot[:, p], translations[:, j]
+            )
+    return world_pos
+
+
+def resample_times(n_frames: int, source_fps: float, target_fps: float) -> np.ndarray:
+    """Fractional source frame indices (m,) of the frames of a clip resampled to `target_fps`.
+
+    The clip spans (n_frames - 1) / source_fps seconds; the result starts at 0 and keeps
+    every target frame that falls inside it. A rate ratio within 0.05% of an integer (120
+    fps files written with a frame time of .0083333) is taken as that integer, so frames
+    are picked rather than interpolated.
+    """
+    ratio = source_fps / target_fps
+    if round(ratio) >= 1 and abs(ratio - round(ratio)) < 5e-4 * ratio:
+        ratio = float(round(ratio))
+    m = int(np.floor((n_frames - 1) / ratio + 1e-9)) + 1
+    return np.arange(m) * ratio
+
+
+def sample_rotations(rotations: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Quaternions (n, J, 4) sampled at fractional frame indices `times` (m,) -> (m, J, 4).
+
+    Integer times pick frames exactly; others use normalised linear interpolation on the
+    shorter arc, which is accurate for the small angles between neighbouring frames.
+    """
+    lo, frac = _split_times(times, len(rotations))
+    q0 = rotations[lo]
+    q1 = rotations[np.minimum(lo + 1, len(rotations) - 1)]
+    q1 = np.where((np.sum(q0 * q1, axis=-1) < 0)[..., None], -q1, q1)
+    q = q0 + frac[:, None, None] * (q1 - q0)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def sample_linear(values: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """Arrays (n, ...) linearly interpolated at fractional frame indices `times` (m,)."""
+    lo, frac = _split_times(times, len(values))
+    v0 = values[lo]
+    v1 = values[np.minimum(lo + 1, len(values) - 1)]
+    shape = (-1,) + (1,) * (values.ndim - 1)
+    return v0 + frac.reshape(shape) * (v1 - v0)
+
+
+def _split_times(times: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    times = np.clip(np.asarray(times, dtype=np.float64), 0.0, n - 1)
+    lo = np.floor(times + 1e-9).astype(np.int64)
+    lo = np.minimum(lo, n - 1)
+    frac = np.clip(times - lo, 0.0, 1.0)
+    return lo, frac
