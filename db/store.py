@@ -26,6 +26,7 @@ import os
 import sqlite3
 import time
 import uuid
+import zipfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -95,8 +96,9 @@ class PoseStore:
 
     `poses` (n, 13, 3) float32 meters, `take_ids` (n,) and `frames` (n,) int32 are the
     snapshot taken when the store was opened (or last refreshed); `takes` lists the
-    catalog rows. Changing operations (`add`, `remove`, `label`) lock the store, commit,
-    and refresh this object's snapshot.
+    catalog rows. Changing operations (`add`, `remove`, `label`) lock the store, refresh
+    this object's snapshot (so they build on the latest committed state, whichever object
+    or process committed it), commit, and refresh it again.
     """
 
     def __init__(self, path: Path) -> None:
@@ -162,7 +164,7 @@ class PoseStore:
             state = read_state(conn)
             takes = read_takes(conn)
             conn.execute("COMMIT")
-        except sqlite3.DatabaseError as exc:
+        except (sqlite3.DatabaseError, ValueError) as exc:  # ValueError: bad text or JSON
             raise StoreError(str(self.path / CATALOG), f"catalog unreadable: {exc}") from exc
         finally:
             conn.close()
@@ -192,7 +194,7 @@ class PoseStore:
     def _connect(self) -> sqlite3.Connection:
         try:
             return connect(self.path / CATALOG)
-        except sqlite3.Error as exc:
+        except (sqlite3.Error, UnicodeDecodeError) as exc:  # a damaged schema can give either
             raise StoreError(str(self.path / CATALOG), f"cannot open catalog: {exc}") from exc
 
     def __len__(self) -> int:
@@ -202,7 +204,7 @@ class PoseStore:
 
     def take(self, ref: int | str) -> TakeInfo:
         """A take by id or by name; raises `StoreError` if there is none (or several)."""
-        if isinstance(ref, int) or (isinstance(ref, str) and ref.isdigit()):
+        if isinstance(ref, int | np.integer) or (isinstance(ref, str) and ref.isdigit()):
             hits = [t for t in self.takes if t.id == int(ref)]
         else:
             hits = [t for t in self.takes if t.name == ref]
@@ -222,8 +224,8 @@ class PoseStore:
         if self._index is None:
             if len(self) == 0:
                 raise StoreError(str(self.path), "the store holds no poses to search")
-            index = PoseIndex.load(self.path / INDEX, self.poses)
-            if index is None or index.generation != self.generation:
+            index = self._load_saved_index()
+            if index is None:
                 index = PoseIndex.build(self.poses, generation=self.generation)
                 self._save_index_if_current(index)
             self._index = index
@@ -231,8 +233,15 @@ class PoseStore:
 
     def index_is_fresh(self) -> bool:
         """True when `index.npz` matches the committed state (no rebuild on open)."""
-        index = PoseIndex.load(self.path / INDEX, self.poses) if len(self) else None
-        return index is not None and index.generation == self.generation
+        return len(self) > 0 and self._load_saved_index() is not None
+
+    def _load_saved_index(self) -> PoseIndex | None:
+        """`index.npz` if it is readable and tagged with this snapshot's generation."""
+        try:
+            index = PoseIndex.load(self.path / INDEX, self.poses)
+        except zipfile.BadZipFile:  # a damaged file: PoseIndex.load lets this one through
+            return None
+        return index if index is not None and index.generation == self.generation else None
 
     def _save_index_if_current(self, index: PoseIndex) -> None:
         with self._lock(blocking=False) as locked:
@@ -289,14 +298,18 @@ class PoseStore:
     def _writing(self, poses_change: bool = True) -> Iterator[sqlite3.Connection]:
         """Lock the store, open a write transaction; commit and refresh on success.
 
-        With `poses_change` the commit gets a new generation, which makes the saved
-        index stale. Raising inside rolls everything back.
+        Inside, this object's snapshot is the committed state the transaction starts
+        from (another object or process may have committed since it was taken). Data
+        files of other states are deleted before and after, under the lock. With
+        `poses_change` the commit gets a new generation, which makes the saved index
+        stale. Raising inside rolls everything back.
         """
         with self._lock():
             conn = self._connect()
             try:
                 conn.execute("BEGIN IMMEDIATE")
                 self._remove_orphans(read_state(conn))
+                self.refresh()
                 yield conn
                 if poses_change:
                     conn.execute(
@@ -311,6 +324,7 @@ class PoseStore:
             finally:
                 conn.close()
             self.refresh()
+            self._remove_orphans({"data_name": self.data_name})
 
     def _remove_orphans(self, state: dict[str, str]) -> None:
         current = {f"poses-{state['data_name']}.f32", f"rows-{state['data_name']}.i32"}
@@ -330,8 +344,11 @@ class PoseStore:
         `duplicate_of` when a take with the same content hash is already stored.
 
         `min_change` (meters) drops near-duplicate consecutive poses. With
-        `build_index` the index is rebuilt and saved after the commit.
+        `build_index` the index is rebuilt and saved after the commit. A take without
+        poses raises `StoreError` before anything is written.
         """
+        if len(take) == 0:
+            raise StoreError(take.source or take.name, "the take holds no poses")
         keep = drop_near_duplicates(take.poses, min_change)
         poses = take.poses[keep]
         frames = take.frames[keep]
@@ -432,7 +449,6 @@ class PoseStore:
             conn.executemany("DELETE FROM takes WHERE id = ?", [(i,) for i in sorted(targets)])
             conn.execute("UPDATE state SET value = ? WHERE key = 'n_poses'", (str(total),))
             conn.execute("UPDATE state SET value = ? WHERE key = 'data_name'", (name,))
-        self._remove_orphans({"data_name": self.data_name})
         if len(self):
             self.build_index()
         else:
@@ -492,6 +508,8 @@ class PoseStore:
         conn = self._connect()
         try:
             result = conn.execute("PRAGMA integrity_check").fetchone()[0]
+        except sqlite3.DatabaseError as exc:
+            result = str(exc)
         finally:
             conn.close()
         if result != "ok":

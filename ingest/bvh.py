@@ -346,11 +346,18 @@ def _diagnose_frames(
 ) -> None:
     """Find the first offending data line and raise a `BvhError` naming it."""
     row = 0
+    last = max((i for i, line in enumerate(lines) if line.strip()), default=-1)
     for i, line in enumerate(lines):
         values = line.split()
         if not values:
             continue
         where = first_line + i
+        if i == last and len(values) < n_channels and row < frames:
+            raise BvhError(
+                source,
+                f"file ends inside frame {row} ({len(values)} of {n_channels} values; truncated?)",
+                where,
+            )
         if row >= frames:
             raise BvhError(source, f"more frame lines than 'Frames: {frames}' declares", where)
         for v in values:

@@ -20,6 +20,7 @@ from ingest.normalize import (
     floor_height,
     leading_tpose_frames,
     leg_length,
+    level_floor,
     rotation_to_y_up,
 )
 from ingest.rigs import RigMap, map_rig
@@ -117,6 +118,9 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
         positions, first = positions[tpose:], tpose
     elif tpose:
         warnings.append(f"starts with {tpose} T-pose frame(s); --skip-tpose drops them")
+    positions, tilt = level_floor(positions, options.fps)
+    if tilt > 1.0:
+        warnings.append(f"capture floor tilted {tilt:.1f} degrees: levelled")
     positions[..., 1] -= floor_height(positions)
     leg = leg_length(positions)
     if not 0.4 <= leg <= 1.2:
@@ -138,5 +142,11 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
         frames=np.arange(first, first + len(positions)),
         source_frames=bvh.n_frames,
         warnings=warnings,
-        meta={"units": units, "up": up, "source_fps": f"{bvh.fps:.3f}", "handedness": handedness},
+        meta={
+            "units": units,
+            "up": up,
+            "source_fps": f"{bvh.fps:.3f}",
+            "handedness": handedness,
+            "floor_tilt_deg": f"{tilt:.2f}",
+        },
     )

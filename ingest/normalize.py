@@ -102,6 +102,68 @@ def floor_height(positions: np.ndarray) -> float:
     return float(np.percentile(positions[:, _FEET, 1].min(axis=1), 5))
 
 
+def foot_contacts(
+    positions: np.ndarray, fps: float, max_speed: float = 0.15, min_seconds: float = 0.1
+) -> np.ndarray:
+    """Foot positions (m, 3) at ground contact in poses (n, 13, 3), meters, +Y up.
+
+    A foot is in contact where it is the lower of the two feet and has moved slower than
+    `max_speed` m/s for at least `min_seconds` in a row (which leaves out the apex of a
+    hop, where a foot is slow only for an instant).
+    """
+    feet = positions[:, _FEET]
+    if len(feet) < 2:
+        return np.empty((0, 3))
+    speed = np.linalg.norm(np.gradient(feet, axis=0), axis=-1) * fps
+    height = feet[..., 1]
+    slow = (speed < max_speed) & (height <= height.min(axis=1, keepdims=True))
+    run = max(int(np.ceil(min_seconds * fps)), 1)
+    kernel = np.ones(run, dtype=int)
+    steady = np.zeros_like(slow)
+    for side in range(2):
+        windows = np.convolve(slow[:, side].astype(int), kernel, mode="valid") == run
+        for shift in range(run):
+            steady[shift : shift + len(windows), side] |= windows
+    return feet[steady]
+
+
+def level_floor(
+    positions: np.ndarray, fps: float, max_tilt_deg: float = 8.0, min_spread: float = 1.0
+) -> tuple[np.ndarray, float]:
+    """Poses (n, 13, 3) turned so that a tilted capture floor becomes level, and the tilt.
+
+    A plane y = a x + b z + c is fitted to the foot contacts (`foot_contacts`), ignoring
+    contacts more than 3 cm above it (heels lifting); when the contacts spread over at
+    least `min_spread` meters and the plane tilts by less than `max_tilt_deg`, the poses
+    are rotated about the contacts' centroid so the plane becomes horizontal. Returns the
+    poses (unchanged when not levelled) and the tilt removed, in degrees.
+    """
+    contacts = foot_contacts(positions, fps)
+    if len(contacts) < 10:
+        return positions, 0.0
+    horizontal = contacts[:, [0, 2]]
+    if np.ptp(horizontal, axis=0).max() < min_spread:
+        return positions, 0.0
+    keep = np.ones(len(contacts), dtype=bool)
+    design = np.column_stack([horizontal, np.ones(len(contacts))])
+    for _ in range(3):
+        coef, *_ = np.linalg.lstsq(design[keep], contacts[keep, 1], rcond=None)
+        residual = contacts[:, 1] - design @ coef
+        keep = residual < np.percentile(residual, 10) + 0.03
+    normal = np.array([-coef[0], 1.0, -coef[1]])
+    normal /= np.linalg.norm(normal)
+    tilt = float(np.degrees(np.arccos(np.clip(normal[1], -1.0, 1.0))))
+    if tilt < 1e-3 or tilt > max_tilt_deg:
+        return positions, 0.0
+    axis = np.cross(normal, [0.0, 1.0, 0.0])
+    axis /= np.linalg.norm(axis)
+    angle = np.radians(tilt)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    rot = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+    center = contacts.mean(axis=0)
+    return (positions - center) @ rot.T + center, tilt
+
+
 def leading_tpose_frames(positions: np.ndarray, tolerance_deg: float = 20.0) -> int:
     """How many leading poses of (n, 13, 3), +Y up, are a T-pose (both arms straight out).
 

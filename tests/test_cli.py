@@ -1,0 +1,172 @@
+"""The `samba` command line: what a user types and sees."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from db.store import PoseStore
+from samba.cli import main
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    """Run `samba argv...` in-process; returns (exit status, stdout, stderr)."""
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture
+def store_with_cmu(tmp_path: Path, cmu_files: list[Path], capsys) -> Path:
+    store = tmp_path / "store"
+    assert run(capsys, "db", "init", str(store))[0] == 0
+    picked = [
+        str(f)
+        for f in cmu_files
+        if f.name in ("cgspeed_131_01.bvh", "iclone_002_01.bvh", "daz_salsa_10.bvh")
+    ]
+    code, out, _ = run(capsys, "db", "import", str(store), *picked, "--mirror", "--no-progress")
+    assert code == 0, out
+    return store
+
+
+def test_import_prints_a_per_file_summary(store_with_cmu: Path, capsys) -> None:
+    code, out, _ = run(capsys, "db", "ls", str(store_with_cmu))
+    assert code == 0
+    assert "cgspeed_131_01" in out and "iclone_002_01 (mirrored)" in out
+    assert "6 takes" in out
+    code, out, _ = run(capsys, "db", "stats", str(store_with_cmu), "--json")
+    stats = json.loads(out)
+    assert stats["takes"] == 6 and stats["mirrored_takes"] == 3 and stats["index_fresh"]
+
+
+def test_reimport_is_a_no_op_and_bad_files_fail_alone(
+    store_with_cmu: Path, cmu_dir: Path, tmp_path: Path, capsys
+) -> None:
+    broken = tmp_path / "broken.bvh"
+    broken.write_bytes((cmu_dir / "cgspeed_131_02.bvh").read_bytes()[:300_000])
+    before = PoseStore.open(store_with_cmu)
+    code, out, _ = run(
+        capsys,
+        "db",
+        "import",
+        str(store_with_cmu),
+        str(cmu_dir / "cgspeed_131_01.bvh"),
+        str(broken),
+        str(cmu_dir / "iclone_002_02.bvh"),
+        "--no-progress",
+    )
+    assert code == 1  # one file failed
+    lines = out.splitlines()
+    assert any("cgspeed_131_01" in ln and "duplicate" in ln for ln in lines)
+    assert any("broken.bvh" in ln and "failed" in ln and "truncated" in ln for ln in lines)
+    assert any("iclone_002_02" in ln and "added" in ln for ln in lines)
+    after = PoseStore.open(store_with_cmu)
+    assert len(after.takes) == len(before.takes) + 1
+    assert after.verify().ok
+
+
+def test_show_label_query_rm(store_with_cmu: Path, capsys) -> None:
+    code, out, _ = run(capsys, "db", "show", str(store_with_cmu), "daz_salsa_10", "--json")
+    info = json.loads(out)
+    assert info["rig"] == "daz" and info["meta"]["units"] == "cm"
+    code, out, _ = run(
+        capsys,
+        "db",
+        "label",
+        str(store_with_cmu),
+        str(info["id"]),
+        "--action",
+        "salsa",
+        "--tag",
+        "dance",
+        "--tag",
+        "couple",
+    )
+    assert code == 0 and "salsa" in out
+    assert PoseStore.open(store_with_cmu).take(info["id"]).tags == ("couple", "dance")
+
+    code, out, _ = run(
+        capsys,
+        "db",
+        "query",
+        str(store_with_cmu),
+        "--pose",
+        f"{info['id']}:40",
+        "--drop",
+        "l_wrist",
+        "-k",
+        "3",
+        "--json",
+    )
+    hits = json.loads(out)
+    assert code == 0 and len(hits) == 3
+    assert hits[0]["take"] == "daz_salsa_10" and hits[0]["distance_m"] < 1e-4
+
+    code, out, _ = run(capsys, "db", "rm", str(store_with_cmu), "daz_salsa_10")
+    assert code == 0 and "removed takes" in out
+    assert "daz_salsa_10" not in [t.name for t in PoseStore.open(store_with_cmu).takes]
+    code, out, _ = run(capsys, "db", "verify", str(store_with_cmu))
+    assert code == 0 and "ok" in out
+
+
+def test_query_with_explicit_markers(store_with_cmu: Path, capsys) -> None:
+    store = PoseStore.open(store_with_cmu)
+    pose = store.poses[100]
+    text = ";".join(",".join(f"{v:.5f}" for v in pose[j]) for j in (1, 2, 5, 6, 9, 10, 11, 12))
+    code, out, _ = run(capsys, "db", "query", str(store_with_cmu), "--markers", text, "-k", "2")
+    assert code == 0 and "8 of 8 markers present" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["db", "ls", "{tmp}/nothing"], "no pose store here"),
+        (["db", "init", "{store}"], "already exists"),
+        (["db", "query", "{store}", "--markers", "1,2,3"], "expected 8"),
+        (["db", "query", "{store}", "--pose", "1:99999"], "no row 99999"),
+        (["db", "query", "{store}", "--pose", "1:0", "--drop", "nose"], "unknown marker"),
+        (["db", "show", "{store}", "no-such-take"], "no take matching"),
+        (["db", "import", "{store}", "{tmp}/missing.bvh", "--no-progress"], None),
+        (["db", "import", "{store}", "{tmp}", "--rig", "nonsense"], "unknown rig"),
+        (["db", "import", "{store}", "{tmp}", "--fps", "-3"], "--fps must be positive"),
+    ],
+)
+def test_bad_input_gives_one_clear_line(
+    store_with_cmu: Path, tmp_path: Path, capsys, argv: list[str], message: str | None
+) -> None:
+    argv = [a.format(tmp=tmp_path, store=store_with_cmu) for a in argv]
+    before = [t.to_dict() for t in PoseStore.open(store_with_cmu).takes]
+    code, out, err = run(capsys, *argv)
+    assert code == 1
+    if message:
+        assert message in err and err.startswith("samba: error:")
+        assert "Traceback" not in err
+    else:
+        assert "failed" in out
+    assert [t.to_dict() for t in PoseStore.open(store_with_cmu).takes] == before
+
+
+def test_wrong_flag_exits_2_without_traceback(tmp_path: Path) -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "samba.cli", "db", "ls", str(tmp_path), "--bogus"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 2
+    assert "unrecognized arguments: --bogus" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_demo_runs_and_reports(tmp_path: Path, capsys) -> None:
+    code, out, _ = run(capsys, "demo", "--store", str(tmp_path / "demo"), "--takes-per-motion", "1")
+    assert code == 0
+    assert "index loaded without rebuilding" in out
+    assert "verify: ok" in out
+    for motion in ("walk", "run", "jumping_jacks", "arm_swing", "squat", "kick", "wave", "turn"):
+        assert motion in out

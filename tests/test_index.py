@@ -1,0 +1,169 @@
+"""The k-d tree index returns exactly the brute-force nearest poses, with and without
+missing markers, and survives a save/load round trip."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from db.errors import QueryError, StoreError
+from db.index import APPROXIMATE_EPS, PoseIndex
+from ingest.bvh_take import load_bvh_take
+from samba.alignment import align_markers
+from samba.perturb import perturb_joint_angles
+from samba.skeleton import Body, markers_of
+
+
+def _database(n: int, seed: int = 0) -> np.ndarray:
+    """n varied poses (float32, meters): perturbed A-poses of random bodies, headings, places."""
+    rng = np.random.default_rng(seed)
+    base = np.stack(
+        [
+            Body.from_height(h).standard_pose(a)
+            for h, a in zip(rng.uniform(1.5, 1.95, n), rng.uniform(5, 80, n), strict=True)
+        ]
+    )
+    poses = perturb_joint_angles(base, 35.0, rng)
+    yaw = rng.uniform(0, 2 * np.pi, n)
+    c, s = np.cos(yaw), np.sin(yaw)
+    rot = np.zeros((n, 3, 3))
+    rot[:, 0, 0], rot[:, 0, 2], rot[:, 1, 1], rot[:, 2, 0], rot[:, 2, 2] = c, s, 1, -s, c
+    poses = np.einsum("nij,nkj->nki", rot, poses) + rng.uniform(-2, 2, (n, 1, 3)) * [1, 0, 1]
+    return poses.astype(np.float32)
+
+
+def _observations(poses: np.ndarray, n: int, seed: int) -> np.ndarray:
+    """Marker sets near (not equal to) database poses, with 1 cm noise."""
+    rng = np.random.default_rng(seed)
+    picked = poses[rng.choice(len(poses), n)].astype(np.float64)
+    return markers_of(perturb_joint_angles(picked, 8.0, rng)) + rng.normal(0, 0.01, (n, 8, 3))
+
+
+def brute_force(poses: np.ndarray, markers: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The definition: distances over the observation's markers, database aligned likewise."""
+    keep = ~np.isnan(markers).any(axis=1)
+    db = markers_of(poses.astype(np.float64))
+    db[:, ~keep] = np.nan
+    db_aligned, _ = align_markers(db)
+    obs_aligned, _ = align_markers(markers)
+    d = np.linalg.norm((db_aligned[:, keep] - obs_aligned[keep]).reshape(len(poses), -1), axis=1)
+    order = np.argsort(d, kind="stable")[:k]
+    return d[order], order
+
+
+def _assert_same(poses, markers, dist, idx, k) -> None:
+    for m, d_row, i_row in zip(markers, dist, idx, strict=True):
+        d_ref, i_ref = brute_force(poses, m, k)
+        np.testing.assert_allclose(d_row, d_ref, atol=2e-6)
+        # the same poses, up to ties at equal distance
+        assert set(i_row[d_row < d_ref[-1] - 1e-5]) <= set(i_ref)
+        assert np.all(np.diff(d_row) >= -1e-9)
+
+
+@pytest.fixture(scope="module")
+def poses() -> np.ndarray:
+    return _database(20_000)
+
+
+@pytest.fixture(scope="module")
+def index(poses: np.ndarray) -> PoseIndex:
+    return PoseIndex.build(poses, generation="g1")
+
+
+def test_complete_queries_equal_brute_force(poses, index) -> None:
+    markers = _observations(poses, 60, seed=1)
+    dist, idx = index.query(markers, k=10)
+    assert dist.shape == idx.shape == (60, 10)
+    _assert_same(poses, markers, dist, idx, 10)
+
+
+def test_single_query_equals_batch(poses, index) -> None:
+    markers = _observations(poses, 5, seed=2)
+    _, idx = index.query(markers, k=7)
+    for i in range(5):
+        d1, i1 = index.query(markers[i], k=7)
+        assert d1.shape == (7,)
+        np.testing.assert_array_equal(i1, idx[i])
+
+
+def test_a_stored_pose_finds_itself(poses, index) -> None:
+    dist, idx = index.query(markers_of(poses[1234].astype(np.float64)), k=1)
+    assert idx[0] == 1234 and dist[0] < 1e-5
+
+
+@pytest.mark.parametrize("missing", [(0,), (3,), (6,), (0, 1), (2, 5), (4, 7), (1, 6)])
+def test_queries_with_missing_markers_equal_brute_force(poses, index, missing) -> None:
+    markers = _observations(poses, 12, seed=10 + sum(missing))
+    markers[:, list(missing)] = np.nan
+    dist, idx = index.query(markers, k=10)
+    _assert_same(poses, markers, dist, idx, 10)
+
+
+def test_mixed_missing_patterns_in_one_batch(poses, index) -> None:
+    rng = np.random.default_rng(5)
+    markers = _observations(poses, 40, seed=5)
+    for row in markers:
+        row[rng.choice(8, size=rng.integers(0, 3), replace=False)] = np.nan
+    dist, idx = index.query(markers, k=5)
+    _assert_same(poses, markers, dist, idx, 5)
+
+
+def test_missing_marker_still_finds_the_true_pose(poses, index) -> None:
+    markers = markers_of(poses[777].astype(np.float64))
+    markers[[2, 5]] = np.nan  # left wrist and right knee lost
+    dist, idx = index.query(markers, k=3)
+    assert idx[0] == 777 and dist[0] < 1e-5
+
+
+def test_approximate_search_has_high_recall(poses, index) -> None:
+    markers = _observations(poses, 200, seed=3)
+    _, exact = index.query(markers, k=10)
+    _, approx = index.query(markers, k=10, eps=APPROXIMATE_EPS)
+    recall = np.mean([len(set(a) & set(e)) / 10 for a, e in zip(approx, exact, strict=True)])
+    assert recall >= 0.97
+
+
+def test_save_and_load_round_trip_without_pickle(poses, index, tmp_path: Path) -> None:
+    path = tmp_path / "index.npz"
+    index.save(path)
+    with np.load(path, allow_pickle=False) as data:
+        assert all(data[key].dtype != object for key in data.files)
+    loaded = PoseIndex.load(path, poses)
+    assert loaded is not None and loaded.generation == "g1"
+    markers = _observations(poses, 20, seed=4)
+    for a, b in zip(index.query(markers, k=10), loaded.query(markers, k=10), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_load_rejects_stale_or_damaged_files(poses, index, tmp_path: Path) -> None:
+    path = tmp_path / "index.npz"
+    assert PoseIndex.load(path, poses) is None  # absent
+    index.save(path)
+    assert PoseIndex.load(path, poses[:-1]) is None  # built for another pose count
+    path.write_bytes(path.read_bytes()[:1000])
+    assert PoseIndex.load(path, poses) is None  # truncated
+
+
+def test_bad_queries_raise_query_errors(index) -> None:
+    with pytest.raises(QueryError, match="expected"):
+        index.query(np.zeros((7, 3)))
+    with pytest.raises(QueryError, match="k must be"):
+        index.query(np.zeros((8, 3)), k=0)
+    with pytest.raises(QueryError, match="no marker"):
+        index.query(np.full((8, 3), np.nan))
+    with pytest.raises(QueryError, match="eps"):
+        index.query(np.zeros((8, 3)), eps=-1)
+    with pytest.raises(StoreError):
+        PoseIndex.build(np.empty((0, 13, 3), dtype=np.float32))
+
+
+def test_real_data_queries_equal_brute_force(cmu_files: list[Path]) -> None:
+    poses = np.concatenate([load_bvh_take(f).poses for f in cmu_files[::4]])
+    index = PoseIndex.build(poses)
+    held_out = load_bvh_take(cmu_files[1]).poses[::25].astype(np.float64)
+    markers = markers_of(held_out)
+    markers[::3, 3] = np.nan
+    dist, idx = index.query(markers, k=10)
+    _assert_same(poses, markers, dist, idx, 10)
