@@ -77,25 +77,37 @@ class _Tree:
         """
         n = len(self.features)
         z = (f - self.mean) @ self.basis
-        dist = np.empty((len(f), k))
-        idx = np.empty((len(f), k), dtype=np.int64)
-        todo = np.arange(len(f))
+        f32 = f.astype(np.float32)[:, None, :]
         fetch = min(max(candidates, k), n)
-        while len(todo):
-            workers = -1 if len(todo) >= 256 else 1
-            bound, cand = self.tree.query(z[todo], k=fetch, eps=eps, workers=workers)
-            bound = bound.reshape(len(todo), fetch)
-            cand = cand.reshape(len(todo), fetch)
-            diff = self.features[cand] - f[todo, None, :].astype(np.float32)
-            true = np.sqrt(np.einsum("bkd,bkd->bk", diff, diff, dtype=np.float64))
-            order = np.argsort(true, axis=1, kind="stable")[:, :k]
-            best = np.take_along_axis(true, order, axis=1)
-            done = (best[:, -1] <= bound[:, -1]) | (fetch >= n) | (eps > 0)
-            dist[todo[done]] = best[done]
-            idx[todo[done]] = np.take_along_axis(cand, order, axis=1)[done]
-            todo = todo[~done]
+        dist, idx, bound = self._rerank(z, f32, k, fetch, eps)
+        unsure = np.flatnonzero(dist[:, -1] > bound) if eps == 0 else ()
+        while len(unsure) and fetch < n:
             fetch = min(fetch * 4, n)
+            d, i, b = self._rerank(z[unsure], f32[unsure], k, fetch, eps)
+            dist[unsure], idx[unsure] = d, i
+            unsure = unsure[d[:, -1] > b]
         return dist, idx
+
+    def _rerank(
+        self, z: np.ndarray, f32: np.ndarray, k: int, fetch: int, eps: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Fetch `fetch` tree candidates per query and keep the k truly nearest.
+
+        Returns (distances (b, k), indices (b, k), the largest reduced distance fetched
+        (b,)), the last being a lower bound of the distance of every pose not fetched.
+        """
+        workers = -1 if len(z) >= 256 else 1
+        bound, cand = self.tree.query(
+            z, k=[fetch] if fetch == 1 else fetch, eps=eps, workers=workers
+        )
+        diff = self.features[cand] - f32
+        true = np.sqrt(np.einsum("bkd,bkd->bk", diff, diff, dtype=np.float64))
+        rows = np.arange(len(z))[:, None]
+        if fetch > 256:
+            part = np.argpartition(true, k - 1, axis=1)[:, :k]
+            true, cand = true[rows, part], cand[rows, part]
+        order = np.argsort(true, axis=1, kind="stable")[:, :k]
+        return true[rows, order], cand[rows, order], bound[:, -1]
 
 
 class PoseIndex:
@@ -161,10 +173,14 @@ class PoseIndex:
         if not 1 <= k <= len(self):
             raise QueryError("k", f"k must be in 1..{len(self)}, got {k}")
         present = ~np.isnan(markers).any(axis=-1)
+        aligned, _ = align_markers(markers)
+        candidates = max(self.candidates, 2 * k)
+        if present.all():
+            dist, idx = self._full.query(aligned.reshape(len(markers), -1), k, candidates, eps)
+            return (dist[0], idx[0]) if single else (dist, idx)
         if not present.any(axis=1).all():
             raise QueryError("markers", "an observation has no marker present")
         masks = present @ (1 << np.arange(N_MARKERS))
-        aligned, _ = align_markers(markers)
         dist = np.empty((len(markers), k))
         idx = np.empty((len(markers), k), dtype=np.int64)
         for mask in np.unique(masks):
@@ -172,7 +188,7 @@ class PoseIndex:
             keep = present[rows[0]]
             f = aligned[rows][:, keep].reshape(len(rows), -1)
             tree = self._tree(int(mask), keep)
-            dist[rows], idx[rows] = tree.query(f, k, max(self.candidates, 2 * k), eps)
+            dist[rows], idx[rows] = tree.query(f, k, candidates, eps)
         return (dist[0], idx[0]) if single else (dist, idx)
 
     def _tree(self, mask: int, keep: np.ndarray) -> _Tree:

@@ -26,7 +26,6 @@ import os
 import sqlite3
 import time
 import uuid
-import zipfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -232,15 +231,12 @@ class PoseStore:
         return self._index
 
     def index_is_fresh(self) -> bool:
-        """True when `index.npz` matches the committed state (no rebuild on open)."""
+        """True when `index.npz` is the index of this snapshot (a query loads, not rebuilds)."""
         return len(self) > 0 and self._load_saved_index() is not None
 
     def _load_saved_index(self) -> PoseIndex | None:
         """`index.npz` if it is readable and tagged with this snapshot's generation."""
-        try:
-            index = PoseIndex.load(self.path / INDEX, self.poses)
-        except zipfile.BadZipFile:  # a damaged file: PoseIndex.load lets this one through
-            return None
+        index = PoseIndex.load(self.path / INDEX, self.poses)
         return index if index is not None and index.generation == self.generation else None
 
     def _save_index_if_current(self, index: PoseIndex) -> None:

@@ -12,15 +12,15 @@ without tabs. Position channels replace the matching component of the joint's OF
 from __future__ import annotations
 
 import io
+import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ingest.errors import BvhError
-from samba.kinematics import forward_kinematics
+from samba.kinematics import euler_to_quaternions, forward_kinematics
 
 _CHANNELS = {f"{axis}{kind}": (kind, axis) for axis in "XYZ" for kind in ("position", "rotation")}
 _TOKEN = re.compile(r"[{}]|[^\s{}]+")
@@ -80,33 +80,38 @@ class BvhFile:
                 j = self.joints[j].parent
         return sorted(keep)
 
-    def local_transforms(self, subset: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Local transforms of a parent-closed joint subset over all frames.
+    def local_transforms(
+        self, subset: list[int], frames: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Local transforms of a parent-closed joint subset over `frames` (default: all).
 
         Returns (parents (J,) indices into the subset, rotations (n, J, 4) quaternions,
         translations (n, J, 3) in file units).
         """
+        motion = self.motion if frames is None else self.motion[frames]
         position_in = {j: i for i, j in enumerate(subset)}
-        n = self.n_frames
         parents = np.array([position_in.get(self.joints[j].parent, -1) for j in subset])
-        rotations = np.zeros((n, len(subset), 4))
+        rotations = np.zeros((len(motion), len(subset), 4))
         rotations[..., 3] = 1.0
-        translations = np.empty((n, len(subset), 3))
+        translations = np.empty((len(motion), len(subset), 3))
+        by_order: dict[str, tuple[list[int], list[list[int]]]] = {}
         for i, j in enumerate(subset):
             joint = self.joints[j]
             translations[:, i] = joint.offset
             axes, columns = "", []
             for c, name in enumerate(joint.channels):
                 kind, axis = _CHANNELS[name]
-                column = self.motion[:, joint.first_channel + c]
                 if kind == "position":
-                    translations[:, i, "XYZ".index(axis)] = column
+                    translations[:, i, "XYZ".index(axis)] = motion[:, joint.first_channel + c]
                 else:
                     axes += axis
-                    columns.append(column)
+                    columns.append(joint.first_channel + c)
             if axes:
-                angles = np.stack(columns, axis=1)
-                rotations[:, i] = Rotation.from_euler(axes, angles, degrees=True).as_quat()
+                members, cols = by_order.setdefault(axes, ([], []))
+                members.append(i)
+                cols.append(columns)
+        for axes, (members, cols) in by_order.items():
+            rotations[:, members] = euler_to_quaternions(axes, motion[:, cols])
         return parents, rotations, translations
 
     def positions(self, joints: list[int]) -> np.ndarray:
@@ -131,11 +136,16 @@ def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
     """Parse BVH text (bytes or str); `source` names it in error messages."""
     if isinstance(data, bytes):
         if b"\x00" in data:
-            raise BvhError(source, "binary data, not a BVH text file")
+            line = _byte_line(data, data.index(b"\x00"))
+            raise BvhError(source, "binary data, not a BVH text file", line)
         try:
             text = data.decode("utf-8-sig")
         except UnicodeDecodeError as exc:
-            raise BvhError(source, f"not UTF-8 / ASCII text (byte {exc.start})") from exc
+            raise BvhError(
+                source,
+                f"not UTF-8 / ASCII text (byte {exc.start})",
+                _byte_line(data, exc.start),
+            ) from exc
     else:
         text = data
     if not text.strip():
@@ -144,9 +154,9 @@ def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     motion = _MOTION.search(text)
     if motion is None:
-        raise BvhError(
-            source, "no MOTION section (file truncated or not BVH)", text.count("\n") + 1
-        )
+        lines = [ln.rstrip("\r") for ln in text.rstrip().split("\n")]
+        _parse_hierarchy(lines, source)  # names the first thing that is not hierarchy
+        raise BvhError(source, "no MOTION section (file truncated or not BVH)", len(lines))
     head = text[: motion.start()].split("\n")
     joints = _parse_hierarchy([ln.rstrip("\r") for ln in head], source)
     n_channels = sum(len(j.channels) for j in joints)
@@ -155,6 +165,11 @@ def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
     )
     motion_data = _parse_frames(text[offset:], first_line, frames, n_channels, source)
     return BvhFile(source=source, joints=tuple(joints), frame_time=frame_time, motion=motion_data)
+
+
+def _byte_line(data: bytes, offset: int) -> int:
+    """1-based line number of byte `offset` of `data` (LF, CRLF or CR line ends)."""
+    return data[:offset].replace(b"\r\n", b"\n").replace(b"\r", b"\n").count(b"\n") + 1
 
 
 class _Tokens:
@@ -191,7 +206,10 @@ class _Tokens:
         token = self.take(what)
         if not _NUMBER.match(token):
             raise BvhError(self.source, f"{what}: {token!r} is not a number", line)
-        return float(token)
+        value = float(token)
+        if not math.isfinite(value):
+            raise BvhError(self.source, f"{what}: {token!r} is out of range", line)
+        return value
 
 
 def _parse_hierarchy(lines: list[str], source: str) -> list[BvhJoint]:
@@ -202,14 +220,19 @@ def _parse_hierarchy(lines: list[str], source: str) -> list[BvhJoint]:
         raise BvhError(source, "expected ROOT after HIERARCHY", tokens.line)
     while tokens.peek() is not None:
         line = tokens.line
-        keyword = tokens.take("ROOT").upper()
-        if keyword != "ROOT":
+        keyword = tokens.take("ROOT")
+        if keyword.upper() != "ROOT":
             raise BvhError(source, f"expected ROOT or MOTION, found {keyword!r}", line)
         _parse_joint(tokens, joints, parent=-1, end_site=False)
-    names = [j.name for j in joints]
-    duplicates = sorted({n for n in names if names.count(n) > 1})
-    if duplicates:
-        raise BvhError(source, f"duplicate joint names: {', '.join(duplicates)}")
+    first_line: dict[str, int] = {}
+    for joint in joints:
+        if joint.name in first_line:
+            raise BvhError(
+                source,
+                f"duplicate joint name {joint.name!r} (first on line {first_line[joint.name]})",
+                joint.line,
+            )
+        first_line[joint.name] = joint.line
     return joints
 
 
@@ -230,7 +253,7 @@ def _parse_joint(tokens: _Tokens, joints: list[BvhJoint], parent: int, end_site:
         if end_site:
             raise BvhError(tokens.source, "an End Site cannot have CHANNELS", tokens.line)
         channels = _parse_channels(tokens, name)
-    first = sum(len(j.channels) for j in joints)
+    first = joints[-1].first_channel + len(joints[-1].channels) if joints else 0
     index = len(joints)
     joints.append(BvhJoint(name, parent, offset, channels, first, end_site, line))
     while True:
@@ -253,14 +276,13 @@ def _parse_channels(tokens: _Tokens, joint: str) -> tuple[str, ...]:
     tokens.take("CHANNELS")
     line = tokens.line
     count_token = tokens.take("a channel count")
-    if not count_token.isdigit():
+    if not (count_token.isascii() and count_token.isdigit()):
         raise BvhError(
             tokens.source, f"channel count {count_token!r} of {joint} is not an integer", line
         )
     count = int(count_token)
     names = []
-    for _ in range(count):
-        line = tokens.line
+    for _ in range(count):  # errors name the CHANNELS line
         token = tokens.take(f"{count} channel names for {joint}")
         normal = token[0].upper() + token[1:].lower() if token else token
         if normal not in _CHANNELS:
@@ -279,7 +301,7 @@ def _parse_motion_header(
     text: str, pos: int, motion_line: int, source: str
 ) -> tuple[int, float, int, int]:
     """Read 'Frames:' and 'Frame Time:' after MOTION; returns them, the data offset and line."""
-    line_no = motion_line
+    line_no = motion_line - 1  # the first line read is the rest of the MOTION line
     values: dict[str, tuple[str, int]] = {}
     for key in ("frames", "frame time"):
         while True:
@@ -297,14 +319,16 @@ def _parse_motion_header(
             raise BvhError(source, f"expected '{key.title()}: ...', found {line!r}", line_no)
         values[key] = (value.strip(), line_no)
     (frames_text, frames_line), (time_text, time_line) = values["frames"], values["frame time"]
-    if not frames_text.isdigit():
+    if not (frames_text.isascii() and frames_text.isdigit()):
         raise BvhError(source, f"frame count {frames_text!r} is not an integer", frames_line)
     frames = int(frames_text)
     if frames <= 0:
         raise BvhError(source, "the file has no frames (Frames: 0)", frames_line)
-    if not _NUMBER.match(time_text) or not 0 < float(time_text) < 10:
+    if not _NUMBER.match(time_text) or not 1e-6 <= float(time_text) < 10:
         raise BvhError(
-            source, f"frame time {time_text!r} is not a positive number of seconds", time_line
+            source,
+            f"frame time {time_text!r} is not a duration in seconds (1e-6 up to 10)",
+            time_line,
         )
     return frames, float(time_text), min(pos, len(text)), line_no + 1
 
@@ -375,6 +399,6 @@ def _diagnose_frames(
         raise BvhError(
             source,
             f"file ends after {row} of the {frames} frames 'Frames:' declares (truncated?)",
-            first_line + len(lines) - 1,
+            first_line + last if last >= 0 else first_line - 1,
         )
     raise BvhError(source, "motion data could not be read", first_line)

@@ -28,6 +28,8 @@ from samba.kinematics import forward_kinematics, resample_times, sample_linear, 
 from samba.take import Take
 
 _CMU_NAME = re.compile(r"(\d+)_(\d+)$")
+_MAX_REACH = 1e9
+"""Largest joint coordinate accepted, in file units (1000 km in mm): beyond is corrupt data."""
 
 
 @dataclass(frozen=True)
@@ -55,8 +57,8 @@ class BvhImportOptions:
     action: str = ""
 
     def __post_init__(self) -> None:
-        if not self.fps > 0:
-            raise ValueError(f"--fps must be positive, got {self.fps}")
+        if not 0 < self.fps < float("inf"):
+            raise ValueError(f"--fps must be positive and finite, got {self.fps}")
         if self.skip_frames < 0:
             raise ValueError(f"--skip-frames must be >= 0, got {self.skip_frames}")
         if self.units != "auto" and self.units not in UNITS:
@@ -88,14 +90,25 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
             source, f"--skip-frames {options.skip_frames} drops all {bvh.n_frames} frames"
         )
     subset = bvh.ancestry(joints)
-    parents, rotations, translations = bvh.local_transforms(subset)
-    rotations = rotations[options.skip_frames :]
-    translations = translations[options.skip_frames :]
-    times = resample_times(len(rotations), bvh.fps, options.fps)
-    world = forward_kinematics(
-        parents, sample_rotations(rotations, times), sample_linear(translations, times)
+    times = resample_times(bvh.n_frames - options.skip_frames, bvh.fps, options.fps)
+    lo = np.floor(times + 1e-9).astype(np.int64)
+    needed = np.unique(
+        np.minimum(np.concatenate([lo, lo + 1]), bvh.n_frames - 1 - options.skip_frames)
     )
+    parents, rotations, translations = bvh.local_transforms(subset, needed + options.skip_frames)
+    local_times = np.searchsorted(needed, lo) + (times - lo)
+    with np.errstate(over="ignore", invalid="ignore"):
+        world = forward_kinematics(
+            parents,
+            sample_rotations(rotations, local_times),
+            sample_linear(translations, local_times),
+        )
     positions = world[:, [subset.index(j) for j in joints]]
+    reach = float(np.abs(positions).max())
+    if not reach < _MAX_REACH:  # also catches NaN from overflowing values
+        raise BvhError(
+            source, f"joint positions reach {reach:.3g} file units: offsets or motion out of range"
+        )
 
     warnings: list[str] = []
     units = detect_units(positions) if options.units == "auto" else options.units
@@ -121,7 +134,7 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
     positions, tilt = level_floor(positions, options.fps)
     if tilt > 1.0:
         warnings.append(f"capture floor tilted {tilt:.1f} degrees: levelled")
-    positions[..., 1] -= floor_height(positions)
+    positions[..., 1] -= floor_height(positions, options.fps)
     leg = leg_length(positions)
     if not 0.4 <= leg <= 1.2:
         warnings.append(f"leg length {leg:.2f} m is implausible: check --units (read as {units})")

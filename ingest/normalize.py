@@ -97,8 +97,15 @@ def chirality(positions: np.ndarray) -> float:
     return float(both.mean()) if len(both) else 0.0
 
 
-def floor_height(positions: np.ndarray) -> float:
-    """Height (m) of the foot joints at ground contact: 5th percentile of the lower foot."""
+def floor_height(positions: np.ndarray, fps: float) -> float:
+    """Height (m) of the foot joints at ground contact in poses (n, 13, 3), +Y up.
+
+    The 10th percentile of the heights of `foot_contacts` (feet standing still); for a
+    take with fewer than 10 contacts, the 5th percentile of the lower foot's height.
+    """
+    contacts = foot_contacts(positions, fps)
+    if len(contacts) >= 10:
+        return float(np.percentile(contacts[:, 1], 10))
     return float(np.percentile(positions[:, _FEET, 1].min(axis=1), 5))
 
 
@@ -133,10 +140,12 @@ def level_floor(
     """Poses (n, 13, 3) turned so that a tilted capture floor becomes level, and the tilt.
 
     A plane y = a x + b z + c is fitted to the foot contacts (`foot_contacts`), ignoring
-    contacts more than 3 cm above it (heels lifting); when the contacts spread over at
-    least `min_spread` meters and the plane tilts by less than `max_tilt_deg`, the poses
-    are rotated about the contacts' centroid so the plane becomes horizontal. Returns the
-    poses (unchanged when not levelled) and the tilt removed, in degrees.
+    contacts more than 3 cm above it (heels lifting). The poses are rotated about the
+    contacts' centroid so the plane becomes horizontal only when the evidence is clear:
+    the contacts spread over at least `min_spread` meters, the plane explains most of
+    their height variation (residual spread under half the raw spread, which is over
+    1 cm), and it tilts by less than `max_tilt_deg`. Returns the poses (unchanged when
+    not levelled) and the tilt removed, in degrees.
     """
     contacts = foot_contacts(positions, fps)
     if len(contacts) < 10:
@@ -150,6 +159,9 @@ def level_floor(
         coef, *_ = np.linalg.lstsq(design[keep], contacts[keep, 1], rcond=None)
         residual = contacts[:, 1] - design @ coef
         keep = residual < np.percentile(residual, 10) + 0.03
+    raw_spread = np.std(contacts[keep, 1])
+    if not (raw_spread > 0.01 and np.std(residual[keep]) < 0.5 * raw_spread):
+        return positions, 0.0
     normal = np.array([-coef[0], 1.0, -coef[1]])
     normal /= np.linalg.norm(normal)
     tilt = float(np.degrees(np.arccos(np.clip(normal[1], -1.0, 1.0))))

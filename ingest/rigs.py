@@ -69,10 +69,14 @@ class RigMap:
         joints = []
         for j in JOINT_NAMES:
             value = table[j]
-            options = (value,) if isinstance(value, str) else tuple(value)
-            if not options or not all(isinstance(v, str) and v for v in options):
+            options = [value] if isinstance(value, str) else value
+            if not (
+                isinstance(options, list)
+                and options
+                and all(isinstance(v, str) and v for v in options)
+            ):
                 raise RigError(str(path), f"joint {j} must map to a name or a list of names")
-            joints.append(options)
+            joints.append(tuple(options))
         name = doc.get("name", path.stem)
         return cls(name=str(name), joints=tuple(joints))
 

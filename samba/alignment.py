@@ -49,17 +49,12 @@ class Alignment:
         """The alignment of marker sets (n, 8, 3) in meters, NaN for missing markers."""
         markers = _as_batch(markers)
         present = ~np.isnan(markers).any(axis=-1)
-        count = present.sum(axis=1)
-        summed = np.where(present[..., None], markers, 0.0).sum(axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            origin = summed / count[:, None]
-        yaw = np.zeros(len(markers))
-        undecided = np.ones(len(markers), dtype=bool)
-        for left, right in HEADING_PAIRS:
-            usable = undecided & present[:, left] & present[:, right]
-            line = markers[usable, left] - markers[usable, right]
-            yaw[usable] = np.arctan2(line[:, 2], line[:, 0])
-            undecided &= ~usable
+        if present.all():
+            origin = markers.mean(axis=1)
+            line = markers[:, 0] - markers[:, 1]
+            yaw = np.arctan2(line[:, 2], line[:, 0])
+        else:
+            origin, yaw = _partial_origin_and_yaw(markers, present)
         scale = np.ones(len(markers))
         if scale_by_tibia:
             lengths = np.stack(
@@ -76,26 +71,22 @@ class Alignment:
     def __len__(self) -> int:
         return len(self.yaw)
 
-    def _rotation(self) -> np.ndarray:
-        c, s = np.cos(self.yaw), np.sin(self.yaw)
-        rot = np.zeros((len(self.yaw), 3, 3))
-        rot[:, 0, 0] = c
-        rot[:, 0, 2] = s
-        rot[:, 1, 1] = 1.0
-        rot[:, 2, 0] = -s
-        rot[:, 2, 2] = c
-        return rot
+    def _turn(self, points: np.ndarray, sign: float) -> np.ndarray:
+        """Rotate points (n, m, 3) about +Y by sign * yaw."""
+        c = np.cos(self.yaw)[:, None]
+        s = sign * np.sin(self.yaw)[:, None]
+        x, y, z = points[..., 0], points[..., 1], points[..., 2]
+        return np.stack([c * x + s * z, y, c * z - s * x], axis=-1)
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """World points (n, m, 3) to the canonical frame (n, m, 3); NaN stays NaN."""
-        points = np.asarray(points, dtype=np.float64)
-        moved = points - self.origin[:, None, :]
-        return self.scale[:, None, None] * np.einsum("nij,nmj->nmi", self._rotation(), moved)
+        moved = np.asarray(points, dtype=np.float64) - self.origin[:, None, :]
+        return self.scale[:, None, None] * self._turn(moved, 1.0)
 
     def invert(self, points: np.ndarray) -> np.ndarray:
         """Canonical points (n, m, 3) back to the world frame (n, m, 3)."""
         points = np.asarray(points, dtype=np.float64) / self.scale[:, None, None]
-        return np.einsum("nji,nmj->nmi", self._rotation(), points) + self.origin[:, None, :]
+        return self._turn(points, -1.0) + self.origin[:, None, :]
 
 
 def align_markers(
@@ -107,6 +98,24 @@ def align_markers(
     alignment = Alignment.from_markers(batch, scale_by_tibia=scale_by_tibia)
     aligned = alignment.apply(batch)
     return (aligned[0] if markers.ndim == 2 else aligned), alignment
+
+
+def _partial_origin_and_yaw(
+    markers: np.ndarray, present: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Centroid of the present markers (n, 3) and yaw (n,) from the first complete pair."""
+    count = present.sum(axis=1)
+    summed = np.where(present[..., None], markers, 0.0).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        origin = summed / count[:, None]
+    yaw = np.zeros(len(markers))
+    undecided = np.ones(len(markers), dtype=bool)
+    for left, right in HEADING_PAIRS:
+        usable = undecided & present[:, left] & present[:, right]
+        line = markers[usable, left] - markers[usable, right]
+        yaw[usable] = np.arctan2(line[:, 2], line[:, 0])
+        undecided &= ~usable
+    return origin, yaw
 
 
 def _as_batch(markers: np.ndarray) -> np.ndarray:

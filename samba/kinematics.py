@@ -36,6 +36,37 @@ def forward_kinematics(
     return world_pos
 
 
+def euler_to_quaternions(axes: str, degrees: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) of intrinsic rotations about `axes` (e.g. 'ZXY': Rz @ Rx @ Ry).
+
+    `degrees` (..., len(axes)) holds the angles in the order of `axes`.
+    """
+    half = np.radians(degrees) / 2
+    out = np.zeros((*degrees.shape[:-1], 4))
+    out[..., 3] = 1.0
+    for k, axis in enumerate(axes.upper()):
+        q = np.zeros_like(out)
+        q[..., "XYZ".index(axis)] = np.sin(half[..., k])
+        q[..., 3] = np.cos(half[..., k])
+        out = quaternion_product(out, q)
+    return out
+
+
+def quaternion_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton products a * b of quaternions (..., 4), scalar last (rotation a after b)."""
+    xa, ya, za, wa = np.moveaxis(a, -1, 0)
+    xb, yb, zb, wb = np.moveaxis(b, -1, 0)
+    return np.stack(
+        [
+            wa * xb + xa * wb + ya * zb - za * yb,
+            wa * yb - xa * zb + ya * wb + za * xb,
+            wa * zb + xa * yb - ya * xb + za * wb,
+            wa * wb - xa * xb - ya * yb - za * zb,
+        ],
+        axis=-1,
+    )
+
+
 def resample_times(n_frames: int, source_fps: float, target_fps: float) -> np.ndarray:
     """Fractional source frame indices (m,) of the frames of a clip resampled to `target_fps`.
 

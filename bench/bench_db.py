@@ -1,0 +1,270 @@
+"""Pose database benchmark: import throughput, index build and query latency, store size.
+
+Run from the project root:  python bench/bench_db.py [--sizes 10000,100000,1000000]
+
+Needs the shared CMU data (../shared/data or $SAMBA_DATA). Every table carries a
+baseline measured in the same run:
+
+* import: `np.loadtxt` of the files' motion sections alone (the cost of reading the
+  numbers, before any mapping, kinematics or normalisation);
+* queries: a plain scipy k-d tree over the raw 24-D aligned marker features.
+
+Databases beyond the real poses are grown with small random joint-angle perturbations
+(5 degrees per joint, bone lengths kept). Queries are observations the database does not
+hold: real poses perturbed by 8 degrees per joint plus 1 cm marker noise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import os
+import re
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from db.index import APPROXIMATE_EPS, PoseIndex, _features  # noqa: E402
+from db.store import PoseStore  # noqa: E402
+from ingest.batch import import_paths  # noqa: E402
+from ingest.bvh_take import load_bvh_take  # noqa: E402
+from samba.alignment import align_markers  # noqa: E402
+from samba.perturb import perturb_joint_angles  # noqa: E402
+from samba.skeleton import N_MARKERS, markers_of  # noqa: E402
+from samba.take import Take  # noqa: E402
+
+K = 10
+
+
+def data_dir() -> Path:
+    """The shared CMU folder, or exit with the reason."""
+    env = os.environ.get("SAMBA_DATA")
+    for base in ([Path(env)] if env else []) + [ROOT.parent / "shared" / "data"]:
+        if any((base / "cmu").glob("*.bvh")):
+            return base / "cmu"
+    sys.exit(
+        "bench_db: CMU data not found (set SAMBA_DATA or put ../shared/data beside the project)"
+    )
+
+
+def rss_mb() -> float:
+    """Resident memory of this process in MiB."""
+    with open("/proc/self/status") as fh:
+        kb = int(re.search(r"VmRSS:\s+(\d+)", fh.read()).group(1))
+    return kb / 1024
+
+
+def table(title: str, header: list[str], rows: list[list[object]]) -> None:
+    """Print a plain-text table."""
+    print(f"\n{title}")
+    cells = [header] + [[f"{c:.3g}" if isinstance(c, float) else str(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
+    for j, r in enumerate(cells):
+        print("  " + "  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)))
+        if j == 0:
+            print("  " + "  ".join("-" * w for w in widths))
+
+
+def bench_import(files: list[Path]) -> np.ndarray:
+    """Import throughput; returns the real poses (n, 13, 3)."""
+    source_frames = 0
+    t0 = time.perf_counter()
+    for f in files:
+        text = f.read_text()
+        body = text[text.index("Frame Time") :].split("\n", 1)[1]
+        source_frames += len(np.loadtxt(io.StringIO(body), ndmin=2))
+    base = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    takes = [load_bvh_take(f) for f in files]
+    convert = time.perf_counter() - t0
+    poses = np.concatenate([t.poses for t in takes])
+
+    with tempfile.TemporaryDirectory() as tmp:
+        store = PoseStore.create(Path(tmp) / "s")
+        t0 = time.perf_counter()
+        results = import_paths(store, files, progress=False)
+        full = time.perf_counter() - t0
+        assert all(r.status == "added" for r in results)
+    rows = [
+        ["baseline: np.loadtxt of motion data", base, source_frames / base, "", 1.0],
+        [
+            "read + map + FK + resample + normalise",
+            convert,
+            source_frames / convert,
+            len(poses) / convert,
+            base / convert,
+        ],
+        [
+            "samba db import (store commits + index)",
+            full,
+            source_frames / full,
+            len(poses) / full,
+            base / full,
+        ],
+    ]
+    table(
+        f"Import: {len(files)} CMU files, {source_frames} source frames -> {len(poses)} poses"
+        " at 30 fps (one core)",
+        ["stage", "seconds", "source frames/s", "poses/s", "speed vs baseline"],
+        rows,
+    )
+    return poses
+
+
+def grow(poses: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """n poses: the real ones, then 5-degree joint-angle perturbations of them."""
+    parts = [poses]
+    while sum(len(p) for p in parts) < n:
+        parts.append(perturb_joint_angles(poses, 5.0, rng))
+    return np.concatenate(parts)[:n].astype(np.float32)
+
+
+def latencies(fn, queries: np.ndarray) -> tuple[float, float]:
+    """Median and 99th percentile (microseconds) of fn(query) over single queries."""
+    times = []
+    for q in queries:
+        t0 = time.perf_counter()
+        fn(q)
+        times.append(time.perf_counter() - t0)
+    us = np.array(times) * 1e6
+    return float(np.median(us)), float(np.percentile(us, 99))
+
+
+def throughput(fn, queries: np.ndarray) -> float:
+    """Queries per second of fn(batch)."""
+    t0 = time.perf_counter()
+    fn(queries)
+    return len(queries) / (time.perf_counter() - t0)
+
+
+def recall(found: np.ndarray, truth: np.ndarray) -> float:
+    """Mean fraction of the true k nearest that were found."""
+    return float(
+        np.mean([len(set(a) & set(b)) / len(b) for a, b in zip(found, truth, strict=True)])
+    )
+
+
+def bench_index(real: np.ndarray, sizes: list[int], rng: np.random.Generator) -> None:
+    """Build time, latency, throughput and recall per database size."""
+    picked = real[rng.choice(len(real), 2000)].astype(np.float64)
+    observations = markers_of(perturb_joint_angles(picked, 8.0, rng))
+    observations += rng.normal(0, 0.01, observations.shape)
+    rows, missing_rows = [], []
+    for n in sizes:
+        size_rows, missing = bench_size(grow(real, n, rng), observations)
+        rows += size_rows
+        missing_rows.append(missing)
+        print(f"  ... {n} poses done", flush=True)
+    table(
+        f"k={K} nearest poses, single queries (p50/p99 over 300) and a batch of "
+        f"{len(observations)}; recall@{K} against brute force on 200 queries",
+        [
+            "poses",
+            "method",
+            "build s",
+            "p50 us",
+            "p99 us",
+            "batch q/s",
+            "recall@10",
+            "p50 speed vs baseline",
+        ],
+        rows,
+    )
+    table(
+        "Queries with one marker missing (left wrist): the masked tree is built on first use",
+        ["poses", "first query s", "p50 us", "p99 us", "batch q/s"],
+        missing_rows,
+    )
+
+
+def bench_size(poses: np.ndarray, observations: np.ndarray) -> tuple[list[list], list]:
+    """Table rows for one database: baseline, exact and approximate index; missing marker."""
+    n = len(poses)
+    single = observations[:300]
+    aligned = align_markers(observations)[0].reshape(len(observations), -1)
+    features = _features(poses, np.ones(N_MARKERS, dtype=bool)).astype(np.float64)
+    t0 = time.perf_counter()
+    plain = cKDTree(features)
+    plain_build = time.perf_counter() - t0
+
+    def plain_query(q: np.ndarray) -> object:
+        batch = q.reshape(-1, N_MARKERS, 3)
+        return plain.query(align_markers(batch)[0].reshape(len(batch), -1), k=K, workers=-1)
+
+    b50, b99 = latencies(plain_query, single)
+    b_batch = throughput(plain_query, observations)
+    t0 = time.perf_counter()
+    index = PoseIndex.build(poses)
+    build = time.perf_counter() - t0
+    truth = np.array([np.argsort(np.linalg.norm(features - a, axis=1))[:K] for a in aligned[:200]])
+    rows = [[n, "baseline: cKDTree raw 24-D", plain_build, b50, b99, b_batch, 1.0, 1.0]]
+    for label, eps in (("index, exact", 0.0), (f"index, eps={APPROXIMATE_EPS}", APPROXIMATE_EPS)):
+        p50, p99 = latencies(lambda q, e=eps: index.query(q, K, eps=e), single)
+        batch = throughput(lambda q, e=eps: index.query(q, K, eps=e), observations)
+        found = index.query(observations[:200], K, eps=eps)[1]
+        rows.append([n, label, build, p50, p99, batch, recall(found, truth), b50 / p50])
+    dropped = observations.copy()
+    dropped[:, 2] = np.nan  # left wrist lost
+    t0 = time.perf_counter()
+    index.query(dropped[0], K)
+    first = time.perf_counter() - t0
+    m50, m99 = latencies(lambda q: index.query(q, K), dropped[1:301])
+    return rows, [n, first, m50, m99, throughput(lambda q: index.query(q, K), dropped)]
+
+
+def bench_store(real: np.ndarray, n: int, rng: np.random.Generator) -> None:
+    """Bytes on disk, open time, index load time and memory of a store of n poses."""
+    poses = grow(real, n, rng)
+    with tempfile.TemporaryDirectory() as tmp:
+        store = PoseStore.create(Path(tmp) / "s")
+        t0 = time.perf_counter()
+        store.add(Take(name="grown", poses=poses, fps=30.0, content_hash="grown", rig="bench"))
+        add = time.perf_counter() - t0
+        del store
+        size = sum(p.stat().st_size for p in (Path(tmp) / "s").iterdir())
+        before = rss_mb()
+        t0 = time.perf_counter()
+        store = PoseStore.open(Path(tmp) / "s")
+        opened = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        _ = store.index
+        loaded = time.perf_counter() - t0
+        store.query(markers_of(real[:100].astype(np.float64)), K)
+        after = rss_mb()
+    table(
+        f"Store of {n} poses",
+        [
+            "add + index s",
+            "on disk MiB",
+            "open ms",
+            "index load ms",
+            "RSS after open+load+query MiB",
+        ],
+        [[add, size / 2**20, opened * 1e3, loaded * 1e3, after - before]],
+    )
+
+
+def main() -> None:
+    """Run every section and print its table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--sizes", default="10000,100000,1000000", help="database sizes for the index benchmark"
+    )
+    args = parser.parse_args()
+    sizes = [int(s) for s in args.sizes.split(",")]
+    rng = np.random.default_rng(0)
+    real = bench_import(sorted(data_dir().glob("*.bvh")))
+    bench_index(real, sizes, rng)
+    bench_store(real, max(sizes), rng)
+
+
+if __name__ == "__main__":
+    main()
