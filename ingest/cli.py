@@ -121,7 +121,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     src.add_argument(
         "--pose",
         metavar="TAKE:FRAME",
-        help="use the markers of a stored pose (take id or name, row in the take)",
+        help="use the markers of a stored pose (take id or name : frame number)",
     )
     p.add_argument(
         "--drop",
@@ -281,11 +281,13 @@ def _query(args: argparse.Namespace) -> int:
         take_ref, _, frame_text = args.pose.rpartition(":")
         if not take_ref or not frame_text.isdigit():
             raise InputError("--pose", f"expected TAKE:FRAME, got {args.pose!r}")
-        poses = store.take_poses(take_ref)
-        frame = int(frame_text)
-        if frame >= len(poses):
-            raise InputError("--pose", f"take {take_ref} has {len(poses)} poses, no row {frame}")
-        markers = poses[frame][list(MARKER_JOINTS)].astype(np.float64)
+        info = store.take(take_ref)
+        rows = np.flatnonzero(store.frames[info.rows.start : info.rows.stop] == int(frame_text))
+        if not len(rows):
+            raise InputError(
+                "--pose", f"take {info.name} has no frame {frame_text} (it has {info.frame_count})"
+            )
+        markers = store.poses[info.first_row + rows[0]][list(MARKER_JOINTS)].astype(np.float64)
     else:
         markers = _parse_markers(args.markers)
     for name in filter(None, args.drop.split(",")):
