@@ -445,10 +445,10 @@ class PoseStore:
             conn.executemany("DELETE FROM takes WHERE id = ?", [(i,) for i in sorted(targets)])
             conn.execute("UPDATE state SET value = ? WHERE key = 'n_poses'", (str(total),))
             conn.execute("UPDATE state SET value = ? WHERE key = 'data_name'", (name,))
+            if total == 0:
+                (self.path / INDEX).unlink(missing_ok=True)
         if len(self):
             self.build_index()
-        else:
-            (self.path / INDEX).unlink(missing_ok=True)
         return sorted(targets)
 
     def _write_compacted(self, name: str, keep: list[TakeInfo]) -> int:

@@ -7,6 +7,7 @@ about their origin.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +22,8 @@ class Take:
     `frames` (n,) int holds each pose's frame number at `fps` counted from the start of
     the take (gaps appear where near-duplicate poses were dropped). `source` is the path
     or URI the take came from, `content_hash` a hex digest identifying that source's
-    content, `rig` the skeleton it was mapped from ("synthetic", "cmu-max", ...).
+    content (by default the SHA-256 of the poses), `rig` the skeleton it was mapped from
+    ("synthetic", "cmu-max", ...).
     `warnings` lists what the importer noticed but did not treat as an error; `meta` holds
     free-form facts about the source (detected units, up axis, recording session ...).
     """
@@ -55,6 +57,8 @@ class Take:
             raise ValueError(f"take {self.name!r}: frames must be ({len(poses)},)")
         if not self.source_frames:
             self.source_frames = len(poses)
+        if not self.content_hash:
+            self.content_hash = hashlib.sha256(poses.tobytes()).hexdigest()
 
     def __len__(self) -> int:
         return len(self.poses)
