@@ -141,7 +141,7 @@ class PoseIndex:
         poses: np.ndarray,
         generation: str = "",
         dims: int = DEFAULT_DIMS,
-        candidates: int = 30,
+        candidates: int = 40,
     ) -> PoseIndex:
         """Index poses (n, 13, 3) in meters; `generation` names the store state indexed."""
         if len(poses) == 0:

@@ -313,7 +313,8 @@ def _parse_motion_header(
             if line:
                 break
             if end >= len(text):
-                raise BvhError(source, f"file ends before '{key.title()}:'", line_no)
+                last = text.rstrip().count("\n") + 1  # the last line with content
+                raise BvhError(source, f"file ends before '{key.title()}:'", last)
         label, sep, value = line.partition(":")
         if not sep or " ".join(label.split()).lower() != key:
             raise BvhError(source, f"expected '{key.title()}: ...', found {line!r}", line_no)
@@ -338,7 +339,7 @@ def _parse_frames(
 ) -> np.ndarray:
     """The (frames, n_channels) motion array from the data lines starting at `first_line`."""
     motion = None
-    if n_channels:
+    if n_channels and body.strip():  # loadtxt warns on empty input
         try:
             with np.errstate(all="ignore"):
                 motion = np.loadtxt(io.StringIO(body), dtype=np.float64, ndmin=2, comments=None)

@@ -125,6 +125,8 @@ def foot_contacts(
     height = feet[..., 1]
     slow = (speed < max_speed) & (height <= height.min(axis=1, keepdims=True))
     run = max(int(np.ceil(min_seconds * fps)), 1)
+    if len(feet) < run:
+        return np.empty((0, 3))
     kernel = np.ones(run, dtype=int)
     steady = np.zeros_like(slow)
     for side in range(2):
