@@ -7,7 +7,7 @@ distance between their features over the markers the observation has.
 Design, for 10^6 poses and sub-100-microsecond queries: the k-d tree (scipy `cKDTree`)
 holds a PCA projection of the features to `dims` dimensions. Projection onto an
 orthonormal basis never lengthens a vector, so a pose's projected distance is a lower
-bound of its true distance. A query takes `candidates` nearest poses from the tree,
+bound of its true distance. A query takes `EXACT_FETCH` * k nearest poses from the tree,
 re-ranks them by true distance, and accepts the top k once the k-th true distance is no
 more than the largest projected distance fetched; otherwise it fetches more. Results
 are therefore exact, equal to brute force.
@@ -35,12 +35,16 @@ from db.errors import QueryError, StoreError
 from samba.alignment import align_markers
 from samba.skeleton import N_MARKERS, markers_of
 
-FORMAT = 1
+FORMAT = 2
 DEFAULT_DIMS = 14
 LEAF_SIZE = 32
 MAX_MASK_TREES = 12
 APPROXIMATE_EPS = 0.75
 """The eps of approximate queries that keeps recall@10 >= 0.99 at 10^6 poses (bench_db)."""
+EXACT_FETCH = 2
+"""Exact queries first fetch this many times k candidates (more when not certified)."""
+APPROXIMATE_FETCH = 4
+"""Approximate queries fetch this many times k candidates and re-rank them."""
 
 
 @dataclass(frozen=True)
@@ -67,9 +71,7 @@ class _Tree:
         )
         return cls(features, mean, basis, tree)
 
-    def query(
-        self, f: np.ndarray, k: int, candidates: int, eps: float
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def query(self, f: np.ndarray, k: int, eps: float) -> tuple[np.ndarray, np.ndarray]:
         """k nearest of features f (b, D): distances (b, k), indices (b, k).
 
         With eps == 0 the result is exact (fetching more candidates until certified);
@@ -78,7 +80,7 @@ class _Tree:
         n = len(self.features)
         z = (f - self.mean) @ self.basis
         f32 = f.astype(np.float32)[:, None, :]
-        fetch = min(max(candidates, k), n)
+        fetch = min((EXACT_FETCH if eps == 0 else APPROXIMATE_FETCH) * k, n)
         dist, idx, bound = self._rerank(z, f32, k, fetch, eps)
         unsure = np.flatnonzero(dist[:, -1] > bound) if eps == 0 else ()
         while len(unsure) and fetch < n:
@@ -117,13 +119,10 @@ class PoseIndex:
     (n, 13, 3) stays referenced (it may be a memory map) for trees of masked markers.
     """
 
-    def __init__(
-        self, poses: np.ndarray, full: _Tree, generation: str, dims: int, candidates: int
-    ) -> None:
+    def __init__(self, poses: np.ndarray, full: _Tree, generation: str, dims: int) -> None:
         self.poses = poses
         self.generation = generation
         self.dims = dims
-        self.candidates = candidates
         self._full = full
         self._masked: OrderedDict[int, _Tree] = OrderedDict()
 
@@ -141,13 +140,12 @@ class PoseIndex:
         poses: np.ndarray,
         generation: str = "",
         dims: int = DEFAULT_DIMS,
-        candidates: int = 40,
     ) -> PoseIndex:
         """Index poses (n, 13, 3) in meters; `generation` names the store state indexed."""
         if len(poses) == 0:
             raise StoreError("index", "cannot index an empty pose set")
         features = _features(poses, np.ones(N_MARKERS, dtype=bool))
-        return cls(poses, _Tree.build(features, dims), generation, dims, candidates)
+        return cls(poses, _Tree.build(features, dims), generation, dims)
 
     def query(
         self, markers: np.ndarray, k: int = 10, eps: float = 0.0
@@ -174,9 +172,8 @@ class PoseIndex:
             raise QueryError("k", f"k must be in 1..{len(self)}, got {k}")
         present = ~np.isnan(markers).any(axis=-1)
         aligned, _ = align_markers(markers)
-        candidates = max(self.candidates, 2 * k)
         if present.all():
-            dist, idx = self._full.query(aligned.reshape(len(markers), -1), k, candidates, eps)
+            dist, idx = self._full.query(aligned.reshape(len(markers), -1), k, eps)
             return (dist[0], idx[0]) if single else (dist, idx)
         if not present.any(axis=1).all():
             raise QueryError("markers", "an observation has no marker present")
@@ -188,7 +185,7 @@ class PoseIndex:
             keep = present[rows[0]]
             f = aligned[rows][:, keep].reshape(len(rows), -1)
             tree = self._tree(int(mask), keep)
-            dist[rows], idx[rows] = tree.query(f, k, candidates, eps)
+            dist[rows], idx[rows] = tree.query(f, k, eps)
         return (dist[0], idx[0]) if single else (dist, idx)
 
     def _tree(self, mask: int, keep: np.ndarray) -> _Tree:
@@ -215,7 +212,6 @@ class PoseIndex:
             "generation": np.array(self.generation),
             "scipy": np.array(scipy.__version__),
             "dims": np.array(self.dims),
-            "candidates": np.array(self.candidates),
             "features": full.features,
             "mean": full.mean,
             "basis": full.basis,
@@ -259,7 +255,6 @@ class PoseIndex:
                     full,
                     str(data["generation"]),
                     int(data["dims"]),
-                    int(data["candidates"]),
                 )
         except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
             return None

@@ -150,7 +150,7 @@ def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
         text = data
     if not text.strip():
         raise BvhError(source, "empty file")
-    if _LONE_CR.search(text):
+    if "\r" in text and _LONE_CR.search(text):
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     motion = _MOTION.search(text)
     if motion is None:
