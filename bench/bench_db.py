@@ -33,7 +33,7 @@ from scipy.spatial import cKDTree
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from db.index import APPROXIMATE_EPS, PoseIndex, _features  # noqa: E402
+from db.index import APPROXIMATE_EPS, PoseIndex, marker_features  # noqa: E402
 from db.store import PoseStore  # noqa: E402
 from ingest.batch import import_paths  # noqa: E402
 from ingest.bvh_take import load_bvh_take  # noqa: E402
@@ -195,7 +195,7 @@ def bench_size(poses: np.ndarray, query_sets: dict[str, np.ndarray]) -> tuple[li
     """Table rows for one database: baseline, exact and approximate index per query set,
     and the missing-marker row for the first set."""
     n = len(poses)
-    features = _features(poses, np.ones(N_MARKERS, dtype=bool)).astype(np.float64)
+    features = marker_features(poses, np.ones(N_MARKERS, dtype=bool)).astype(np.float64)
     t0 = time.perf_counter()
     plain = cKDTree(features)
     plain_build = time.perf_counter() - t0

@@ -144,7 +144,7 @@ class PoseIndex:
         """Index poses (n, 13, 3) in meters; `generation` names the store state indexed."""
         if len(poses) == 0:
             raise StoreError("index", "cannot index an empty pose set")
-        features = _features(poses, np.ones(N_MARKERS, dtype=bool))
+        features = marker_features(poses, np.ones(N_MARKERS, dtype=bool))
         return cls(poses, _Tree.build(features, dims), generation, dims)
 
     def query(
@@ -194,7 +194,7 @@ class PoseIndex:
             return self._full
         tree = self._masked.get(mask)
         if tree is None:
-            tree = _Tree.build(_features(self.poses, keep), self.dims)
+            tree = _Tree.build(marker_features(self.poses, keep), self.dims)
             self._masked[mask] = tree
             if len(self._masked) > MAX_MASK_TREES:
                 self._masked.popitem(last=False)
@@ -264,8 +264,10 @@ def _state_item(value: np.ndarray) -> object:
     return value.item() if value.ndim == 0 else value
 
 
-def _features(poses: np.ndarray, keep: np.ndarray, chunk: int = 200_000) -> np.ndarray:
-    """Aligned features (n, 3 * keep.sum()) float32 of poses with markers outside `keep` masked."""
+def marker_features(poses: np.ndarray, keep: np.ndarray, chunk: int = 200_000) -> np.ndarray:
+    """The index's features of poses (n, 13, 3), meters: the markers in `keep` (8,) bool,
+    aligned by `align_markers` with the other markers masked; (n, 3 * keep.sum()) float32.
+    Processed in chunks of `chunk` poses to bound memory."""
     out = np.empty((len(poses), 3 * int(keep.sum())), dtype=np.float32)
     for start in range(0, len(poses), chunk):
         markers = markers_of(np.asarray(poses[start : start + chunk], dtype=np.float64))
