@@ -119,10 +119,13 @@ class PoseIndex:
     (n, 13, 3) stays referenced (it may be a memory map) for trees of masked markers.
     """
 
-    def __init__(self, poses: np.ndarray, full: _Tree, generation: str, dims: int) -> None:
+    def __init__(
+        self, poses: np.ndarray, full: _Tree, generation: str, dims: int, scale_by_tibia: bool
+    ) -> None:
         self.poses = poses
         self.generation = generation
         self.dims = dims
+        self.scale_by_tibia = scale_by_tibia
         self._full = full
         self._masked: OrderedDict[int, _Tree] = OrderedDict()
 
@@ -140,12 +143,17 @@ class PoseIndex:
         poses: np.ndarray,
         generation: str = "",
         dims: int = DEFAULT_DIMS,
+        scale_by_tibia: bool = False,
     ) -> PoseIndex:
-        """Index poses (n, 13, 3) in meters; `generation` names the store state indexed."""
+        """Index poses (n, 13, 3) in meters; `generation` names the store state indexed.
+
+        With `scale_by_tibia` every pose and observation is scaled to the reference tibia
+        length before comparison, so bodies of other sizes find the same poses.
+        """
         if len(poses) == 0:
             raise StoreError("index", "cannot index an empty pose set")
-        features = marker_features(poses, np.ones(N_MARKERS, dtype=bool))
-        return cls(poses, _Tree.build(features, dims), generation, dims)
+        features = marker_features(poses, np.ones(N_MARKERS, dtype=bool), scale_by_tibia)
+        return cls(poses, _Tree.build(features, dims), generation, dims, scale_by_tibia)
 
     def query(
         self, markers: np.ndarray, k: int = 10, eps: float = 0.0
@@ -171,7 +179,7 @@ class PoseIndex:
         if not 1 <= k <= len(self):
             raise QueryError("k", f"k must be in 1..{len(self)}, got {k}")
         present = ~np.isnan(markers).any(axis=-1)
-        aligned, _ = align_markers(markers)
+        aligned, _ = align_markers(markers, scale_by_tibia=self.scale_by_tibia)
         if present.all():
             dist, idx = self._full.query(aligned.reshape(len(markers), -1), k, eps)
             return (dist[0], idx[0]) if single else (dist, idx)
@@ -194,7 +202,8 @@ class PoseIndex:
             return self._full
         tree = self._masked.get(mask)
         if tree is None:
-            tree = _Tree.build(marker_features(self.poses, keep), self.dims)
+            features = marker_features(self.poses, keep, self.scale_by_tibia)
+            tree = _Tree.build(features, self.dims)
             self._masked[mask] = tree
             if len(self._masked) > MAX_MASK_TREES:
                 self._masked.popitem(last=False)
@@ -212,6 +221,7 @@ class PoseIndex:
             "generation": np.array(self.generation),
             "scipy": np.array(scipy.__version__),
             "dims": np.array(self.dims),
+            "scale_by_tibia": np.array(self.scale_by_tibia),
             "features": full.features,
             "mean": full.mean,
             "basis": full.basis,
@@ -255,6 +265,7 @@ class PoseIndex:
                     full,
                     str(data["generation"]),
                     int(data["dims"]),
+                    bool(data["scale_by_tibia"]),
                 )
         except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
             return None
@@ -264,7 +275,9 @@ def _state_item(value: np.ndarray) -> object:
     return value.item() if value.ndim == 0 else value
 
 
-def marker_features(poses: np.ndarray, keep: np.ndarray, chunk: int = 200_000) -> np.ndarray:
+def marker_features(
+    poses: np.ndarray, keep: np.ndarray, scale_by_tibia: bool = False, chunk: int = 200_000
+) -> np.ndarray:
     """The index's features of poses (n, 13, 3), meters: the markers in `keep` (8,) bool,
     aligned by `align_markers` with the other markers masked; (n, 3 * keep.sum()) float32.
     Processed in chunks of `chunk` poses to bound memory."""
@@ -272,6 +285,6 @@ def marker_features(poses: np.ndarray, keep: np.ndarray, chunk: int = 200_000) -
     for start in range(0, len(poses), chunk):
         markers = markers_of(np.asarray(poses[start : start + chunk], dtype=np.float64))
         markers[:, ~keep] = np.nan
-        aligned, _ = align_markers(markers)
+        aligned, _ = align_markers(markers, scale_by_tibia=scale_by_tibia)
         out[start : start + chunk] = aligned[:, keep].reshape(len(markers), -1)
     return out

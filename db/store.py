@@ -108,8 +108,12 @@ class PoseStore:
     # -- opening -------------------------------------------------------------------------
 
     @classmethod
-    def create(cls, path: str | Path) -> PoseStore:
-        """Create an empty store at `path` (a new or empty directory) and open it."""
+    def create(cls, path: str | Path, scale_by_tibia: bool = False) -> PoseStore:
+        """Create an empty store at `path` (a new or empty directory) and open it.
+
+        `scale_by_tibia` makes its index compare poses scaled to a common tibia length
+        (see `PoseIndex.build`); it is fixed for the life of the store.
+        """
         path = Path(path)
         if (path / CATALOG).exists():
             raise StoreError(str(path), "a pose store already exists here")
@@ -127,6 +131,7 @@ class PoseStore:
                 "data_name": "0",
                 "generation": uuid.uuid4().hex,
                 "created": now,
+                "scale_by_tibia": "1" if scale_by_tibia else "0",
             }
             conn.executemany("INSERT INTO state VALUES (?, ?)", state.items())
         finally:
@@ -187,6 +192,7 @@ class PoseStore:
         self.takes = takes
         self.generation = state["generation"]
         self.data_name = name
+        self.scale_by_tibia = state.get("scale_by_tibia") == "1"
         if self._index is not None and self._index.generation != self.generation:
             self._index = None
 
@@ -225,7 +231,9 @@ class PoseStore:
                 raise StoreError(str(self.path), "the store holds no poses to search")
             index = self._load_saved_index()
             if index is None:
-                index = PoseIndex.build(self.poses, generation=self.generation)
+                index = PoseIndex.build(
+                    self.poses, generation=self.generation, scale_by_tibia=self.scale_by_tibia
+                )
                 self._save_index_if_current(index)
             self._index = index
         return self._index
@@ -237,7 +245,9 @@ class PoseStore:
     def _load_saved_index(self) -> PoseIndex | None:
         """`index.npz` if it is readable and tagged with this snapshot's generation."""
         index = PoseIndex.load(self.path / INDEX, self.poses)
-        return index if index is not None and index.generation == self.generation else None
+        if index is None or index.generation != self.generation:
+            return None
+        return index if index.scale_by_tibia == self.scale_by_tibia else None
 
     def _save_index_if_current(self, index: PoseIndex) -> None:
         with self._lock(blocking=False) as locked:
@@ -272,6 +282,7 @@ class PoseStore:
             "seconds": round(sum(t.frame_count / t.fps for t in self.takes), 1),
             "bytes_on_disk": sum(p.stat().st_size for p in files),
             "index_fresh": self.index_is_fresh(),
+            "scale_by_tibia": self.scale_by_tibia,
             "generation": self.generation,
         }
 
@@ -489,7 +500,9 @@ class PoseStore:
 
     def build_index(self) -> PoseIndex:
         """Build the index for the current snapshot and save it (under the lock)."""
-        index = PoseIndex.build(self.poses, generation=self.generation)
+        index = PoseIndex.build(
+            self.poses, generation=self.generation, scale_by_tibia=self.scale_by_tibia
+        )
         with self._lock():
             if self._committed_generation() == self.generation:
                 index.save(self.path / INDEX)

@@ -23,6 +23,11 @@ def register(parser: argparse.ArgumentParser) -> None:
 
     p = sub.add_parser("init", help="create an empty pose store")
     p.add_argument("store", help="directory to create")
+    p.add_argument(
+        "--scale-by-tibia",
+        action="store_true",
+        help="index poses scaled to a common tibia length (finds poses of other body sizes)",
+    )
     p.set_defaults(run=_init)
 
     p = sub.add_parser("import", help="import BVH files or folders of them")
@@ -138,8 +143,9 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def _init(args: argparse.Namespace) -> int:
-    store = PoseStore.create(args.store)
-    print(f"created empty pose store {store.path}")
+    store = PoseStore.create(args.store, scale_by_tibia=args.scale_by_tibia)
+    scaled = " (index scales poses by tibia length)" if store.scale_by_tibia else ""
+    print(f"created empty pose store {store.path}{scaled}")
     return 0
 
 

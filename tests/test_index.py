@@ -41,21 +41,23 @@ def _observations(poses: np.ndarray, n: int, seed: int) -> np.ndarray:
     return markers_of(perturb_joint_angles(picked, 8.0, rng)) + rng.normal(0, 0.01, (n, 8, 3))
 
 
-def brute_force(poses: np.ndarray, markers: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+def brute_force(
+    poses: np.ndarray, markers: np.ndarray, k: int, scale: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """The definition: distances over the observation's markers, database aligned likewise."""
     keep = ~np.isnan(markers).any(axis=1)
     db = markers_of(poses.astype(np.float64))
     db[:, ~keep] = np.nan
-    db_aligned, _ = align_markers(db)
-    obs_aligned, _ = align_markers(markers)
+    db_aligned, _ = align_markers(db, scale_by_tibia=scale)
+    obs_aligned, _ = align_markers(markers, scale_by_tibia=scale)
     d = np.linalg.norm((db_aligned[:, keep] - obs_aligned[keep]).reshape(len(poses), -1), axis=1)
     order = np.argsort(d, kind="stable")[:k]
     return d[order], order
 
 
-def _assert_same(poses, markers, dist, idx, k) -> None:
+def _assert_same(poses, markers, dist, idx, k, scale: bool = False) -> None:
     for m, d_row, i_row in zip(markers, dist, idx, strict=True):
-        d_ref, i_ref = brute_force(poses, m, k)
+        d_ref, i_ref = brute_force(poses, m, k, scale)
         np.testing.assert_allclose(d_row, d_ref, atol=2e-6)
         # the same poses, up to ties at equal distance
         assert set(i_row[d_row < d_ref[-1] - 1e-5]) <= set(i_ref)
@@ -117,6 +119,17 @@ def test_missing_marker_still_finds_the_true_pose(poses, index) -> None:
     assert idx[0] == 777 and dist[0] < 1e-5
 
 
+def test_tibia_scaled_index_finds_a_smaller_body_in_the_same_pose(poses) -> None:
+    scaled = PoseIndex.build(poses, scale_by_tibia=True)
+    small = markers_of(poses[:30].astype(np.float64)) * 0.8  # same poses, 80% size
+    small[::2, 4] = np.nan
+    dist, idx = scaled.query(small, k=5)
+    _assert_same(poses, small, dist, idx, 5, scale=True)
+    assert (idx[:, 0] == np.arange(30)).all() and dist[:, 0].max() < 1e-5
+    _, unscaled = PoseIndex.build(poses).query(small, k=1)
+    assert (unscaled[:, 0] != np.arange(30)).any()
+
+
 def test_approximate_search_has_high_recall(poses, index) -> None:
     markers = _observations(poses, 200, seed=3)
     _, exact = index.query(markers, k=10)
@@ -131,7 +144,7 @@ def test_save_and_load_round_trip_without_pickle(poses, index, tmp_path: Path) -
     with np.load(path, allow_pickle=False) as data:
         assert all(data[key].dtype != object for key in data.files)
     loaded = PoseIndex.load(path, poses)
-    assert loaded is not None and loaded.generation == "g1"
+    assert loaded is not None and loaded.generation == "g1" and not loaded.scale_by_tibia
     markers = _observations(poses, 20, seed=4)
     for a, b in zip(index.query(markers, k=10), loaded.query(markers, k=10), strict=True):
         np.testing.assert_array_equal(a, b)

@@ -702,3 +702,22 @@ def test_an_older_store_object_removes_after_another_removed(store: PoseStore, p
     assert data_files(path) == {"poses-2.f32", "rows-2.i32"}
     with pytest.raises(StoreError, match="removed meanwhile"):
         other.remove(["c"])
+
+
+def test_a_tibia_scaled_store_keeps_its_setting_and_rebuilds_a_mismatched_index(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "scaled"
+    store = PoseStore.create(path, scale_by_tibia=True)
+    store.add(make_take("a", 40, seed=3))
+    reopened = PoseStore.open(path)
+    assert reopened.scale_by_tibia and reopened.index_is_fresh()
+    assert reopened.index.scale_by_tibia and reopened.stats()["scale_by_tibia"] is True
+    small = reopened.poses[7][[1, 2, 5, 6, 9, 10, 11, 12]].astype(np.float64) * 0.9
+    _, rows = reopened.query(small, k=1)
+    assert rows[0] == 7
+    # an index saved without scaling is not taken for this store's
+    PoseIndex.build(reopened.poses, generation=reopened.generation).save(path / INDEX)
+    again = PoseStore.open(path)
+    assert not again.index_is_fresh()
+    assert again.index.scale_by_tibia
