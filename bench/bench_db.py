@@ -74,27 +74,36 @@ def table(title: str, header: list[str], rows: list[list[object]]) -> None:
             print("  " + "  ".join("-" * w for w in widths))
 
 
-def bench_import(files: list[Path]) -> np.ndarray:
-    """Import throughput; returns the real poses (n, 13, 3)."""
-    source_frames = 0
-    t0 = time.perf_counter()
-    for f in files:
-        text = f.read_text()
-        body = text[text.index("Frame Time") :].split("\n", 1)[1]
-        source_frames += len(np.loadtxt(io.StringIO(body), ndmin=2))
-    base = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    takes = [load_bvh_take(f) for f in files]
-    convert = time.perf_counter() - t0
-    poses = np.concatenate([t.poses for t in takes])
-
-    with tempfile.TemporaryDirectory() as tmp:
-        store = PoseStore.create(Path(tmp) / "s")
+def best_of(repeats: int, fn) -> float:
+    """The shortest wall time (seconds) of `repeats` calls of fn() (timeit's convention)."""
+    times = []
+    for _ in range(repeats):
         t0 = time.perf_counter()
-        results = import_paths(store, files, progress=False)
-        full = time.perf_counter() - t0
-        assert all(r.status == "added" for r in results)
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def bench_import(files: list[Path], repeats: int = 3) -> np.ndarray:
+    """Import throughput (best of `repeats` runs per stage); returns the real poses."""
+
+    def parse_numbers() -> None:
+        for f in files:
+            text = f.read_text()
+            np.loadtxt(io.StringIO(text[text.index("Frame Time") :].split("\n", 1)[1]), ndmin=2)
+
+    def import_all() -> None:
+        with tempfile.TemporaryDirectory() as tmp:
+            store = PoseStore.create(Path(tmp) / "s")
+            results = import_paths(store, files, progress=False)
+            assert all(r.status == "added" for r in results)
+
+    takes = [load_bvh_take(f) for f in files]
+    poses = np.concatenate([t.poses for t in takes])
+    source_frames = sum(t.source_frames for t in takes)
+    base = best_of(repeats, parse_numbers)
+    convert = best_of(repeats, lambda: [load_bvh_take(f) for f in files])
+    full = best_of(repeats, import_all)
     rows = [
         ["baseline: np.loadtxt of motion data", base, source_frames / base, "", 1.0],
         [
@@ -114,7 +123,7 @@ def bench_import(files: list[Path]) -> np.ndarray:
     ]
     table(
         f"Import: {len(files)} CMU files, {source_frames} source frames -> {len(poses)} poses"
-        " at 30 fps (one core)",
+        f" at 30 fps (one core, best of {repeats} runs)",
         ["stage", "seconds", "source frames/s", "poses/s", "speed vs baseline"],
         rows,
     )

@@ -11,6 +11,7 @@ without tabs. Position channels replace the matching component of the joint's OF
 
 from __future__ import annotations
 
+import functools
 import io
 import math
 import re
@@ -148,7 +149,7 @@ def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
             ) from exc
     else:
         text = data
-    if not text.strip():
+    if not text or text.isspace():
         raise BvhError(source, "empty file")
     if "\r" in text and _LONE_CR.search(text):
         text = text.replace("\r\n", "\n").replace("\r", "\n")
@@ -157,14 +158,28 @@ def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
         lines = [ln.rstrip("\r") for ln in text.rstrip().split("\n")]
         _parse_hierarchy(lines, source)  # names the first thing that is not hierarchy
         raise BvhError(source, "no MOTION section (file truncated or not BVH)", len(lines))
-    head = text[: motion.start()].split("\n")
-    joints = _parse_hierarchy([ln.rstrip("\r") for ln in head], source)
+    header = text[: motion.start()]
+    joints = _hierarchy(header, source)
     n_channels = sum(len(j.channels) for j in joints)
     frames, frame_time, offset, first_line = _parse_motion_header(
-        text, motion.end(), len(head), source
+        text, motion.end(), header.count("\n") + 1, source
     )
     motion_data = _parse_frames(text[offset:], first_line, frames, n_channels, source)
-    return BvhFile(source=source, joints=tuple(joints), frame_time=frame_time, motion=motion_data)
+    return BvhFile(source=source, joints=joints, frame_time=frame_time, motion=motion_data)
+
+
+def _hierarchy(header: str, source: str) -> tuple[BvhJoint, ...]:
+    """The joints declared by the text before MOTION; files of one rig share the parse."""
+    try:
+        return _parsed_hierarchy(header)
+    except BvhError as exc:
+        raise BvhError(source, exc.problem, exc.line) from None
+
+
+@functools.lru_cache(maxsize=16)
+def _parsed_hierarchy(header: str) -> tuple[BvhJoint, ...]:
+    lines = [ln.rstrip("\r") for ln in header.split("\n")]
+    return tuple(_parse_hierarchy(lines, source=""))
 
 
 def _byte_line(data: bytes, offset: int) -> int:
@@ -175,7 +190,7 @@ def _byte_line(data: bytes, offset: int) -> int:
 class _Tokens:
     def __init__(self, lines: list[str], source: str) -> None:
         self.items = [
-            (m.group(0), n + 1) for n, line in enumerate(lines) for m in _TOKEN.finditer(line)
+            (token, n + 1) for n, line in enumerate(lines) for token in _TOKEN.findall(line)
         ]
         self.pos = 0
         self.source = source
@@ -248,6 +263,7 @@ def _parse_joint(tokens: _Tokens, joints: list[BvhJoint], parent: int, end_site:
     tokens.expect("{")
     tokens.expect("OFFSET")
     offset = np.array([tokens.number(f"OFFSET of {name}") for _ in range(3)])
+    offset.flags.writeable = False  # parsed hierarchies are shared between files
     channels: tuple[str, ...] = ()
     if tokens.peek() is not None and tokens.peek().upper() == "CHANNELS":
         if end_site:

@@ -92,11 +92,13 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
     subset = bvh.ancestry(joints)
     times = resample_times(bvh.n_frames - options.skip_frames, bvh.fps, options.fps)
     lo = np.floor(times + 1e-9).astype(np.int64)
-    needed = np.unique(
-        np.minimum(np.concatenate([lo, lo + 1]), bvh.n_frames - 1 - options.skip_frames)
-    )
+    frac = np.clip(times - lo, 0.0, 1.0)
+    last = bvh.n_frames - 1 - options.skip_frames
+    # only the source frames the output needs: each sample's frame, and the next one
+    # where it interpolates
+    needed = np.unique(np.concatenate([lo, np.minimum(lo[frac > 1e-9] + 1, last)]))
     parents, rotations, translations = bvh.local_transforms(subset, needed + options.skip_frames)
-    local_times = np.searchsorted(needed, lo) + (times - lo)
+    local_times = np.searchsorted(needed, lo) + frac
     with np.errstate(over="ignore", invalid="ignore"):
         world = forward_kinematics(
             parents,
