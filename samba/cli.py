@@ -1,8 +1,9 @@
 """The `samba` console command: one entry point, a subcommand per area.
 
 Each area registers its subcommands from its own package; the table below names the
-module that does so, imported only when needed. A `SambaError` is printed as one line
-on stderr with exit status 1; wrong flags exit with status 2 (argparse).
+module that does so, imported only when needed. A `SambaError` (or an operating
+system error such as a full disk) is printed as one line on stderr with exit status 1;
+wrong flags exit with status 2 (argparse).
 """
 
 from __future__ import annotations
@@ -43,6 +44,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.run(args) or 0)
     except SambaError as exc:
         print(f"samba: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # disk full, permissions, ... on a path the user gave
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"samba: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("samba: interrupted", file=sys.stderr)

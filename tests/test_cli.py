@@ -170,3 +170,12 @@ def test_demo_runs_and_reports(tmp_path: Path, capsys) -> None:
     assert "verify: ok" in out
     for motion in ("walk", "run", "jumping_jacks", "arm_swing", "squat", "kick", "wave", "turn"):
         assert motion in out
+
+
+def test_an_unwritable_place_gives_one_clear_line(tmp_path: Path, capsys) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    (locked / "file").write_text("x")
+    code, _, err = run(capsys, "db", "init", str(locked / "file" / "store"))
+    assert code == 1
+    assert err.startswith("samba: error:") and "Traceback" not in err
