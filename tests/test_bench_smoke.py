@@ -1,0 +1,27 @@
+"""The database benchmark runs end to end (a small version; the real one is bench/bench_db.py)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+_spec = importlib.util.spec_from_file_location("bench_db", ROOT / "bench" / "bench_db.py")
+bench_db = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(bench_db)
+
+
+def test_database_benchmark_prints_its_tables(
+    cmu_files: list[Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    rng = np.random.default_rng(0)
+    real = bench_db.bench_import(cmu_files[:6], repeats=1)
+    bench_db.bench_index(real, [3000], rng)
+    bench_db.bench_store(real, 3000, rng)
+    out = capsys.readouterr().out
+    for heading in ("Import:", "k=10 nearest poses", "one marker missing", "Store of 3000 poses"):
+        assert heading in out
+    assert "baseline: cKDTree raw 24-D" in out and "index, exact" in out
