@@ -63,16 +63,22 @@ def detect_up(positions: np.ndarray) -> str:
 
 def rotation_to_y_up(up: str) -> np.ndarray:
     """A proper rotation matrix (3, 3) taking the signed axis `up` to +Y."""
-    u = UP_AXES[up]
+    return _rotation_onto_y(UP_AXES[up])
+
+
+def _rotation_onto_y(direction: np.ndarray) -> np.ndarray:
+    """The smallest proper rotation (3, 3) taking the unit vector `direction` to +Y."""
     y = np.array([0.0, 1.0, 0.0])
-    if np.allclose(u, y):
-        return np.eye(3)
-    if np.allclose(u, -y):
+    if np.allclose(direction, -y):
         return np.diag([1.0, -1.0, -1.0])
-    axis = np.cross(u, y)
-    axis /= np.linalg.norm(axis)
+    axis = np.cross(direction, y)
+    sin = np.linalg.norm(axis)
+    if sin < 1e-12:
+        return np.eye(3)
+    axis /= sin
+    cos = float(np.dot(direction, y))
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + k + k @ k  # Rodrigues for a 90 degree turn
+    return np.eye(3) + sin * k + (1 - cos) * (k @ k)  # Rodrigues
 
 
 def chirality(positions: np.ndarray) -> float:
@@ -169,11 +175,7 @@ def level_floor(
     tilt = float(np.degrees(np.arccos(np.clip(normal[1], -1.0, 1.0))))
     if tilt < 1e-3 or tilt > max_tilt_deg:
         return positions, 0.0
-    axis = np.cross(normal, [0.0, 1.0, 0.0])
-    axis /= np.linalg.norm(axis)
-    angle = np.radians(tilt)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    rot = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+    rot = _rotation_onto_y(normal)
     center = contacts.mean(axis=0)
     return (positions - center) @ rot.T + center, tilt
 
