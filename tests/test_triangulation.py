@@ -1,0 +1,104 @@
+"""Tests of DLT triangulation `samba.triangulation`."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from samba.camera import Camera
+from samba.triangulation import triangulate, triangulate_cameras
+
+SIZE = (160, 120)
+
+
+def _ring(count: int, size: tuple[int, int] = SIZE, radius: float = 4.0) -> list[Camera]:
+    """`count` cameras on a ring around the origin at varied heights, all aimed at it."""
+    cameras = []
+    for i in range(count):
+        angle = 2 * np.pi * i / count + 0.3
+        position = (radius * np.sin(angle), 1.0 + 0.4 * i, radius * np.cos(angle))
+        cameras.append(Camera.look_at(f"cam{i}", position, (0.0, 1.0, 0.0), size, 60.0))
+    return cameras
+
+
+def _points(n: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform([-0.8, 0.0, -0.8], [0.8, 2.0, 0.8], (n, 3))
+
+
+def _pixels(cameras: list[Camera], points: np.ndarray) -> np.ndarray:
+    return np.stack([camera.project(points) for camera in cameras])
+
+
+@pytest.mark.parametrize("count", [2, 3, 4])
+def test_noise_free_views_recover_the_points(count: int) -> None:
+    cameras = _ring(count)
+    points = _points(500)
+    pixels = _pixels(cameras, points)
+    assert pixels.shape == (count, 500, 2)
+    recovered = triangulate_cameras(cameras, pixels)
+    assert recovered.shape == (500, 3)
+    assert np.abs(recovered - points).max() < 1e-9
+
+
+def test_large_images_and_distant_points_stay_accurate() -> None:
+    cameras = _ring(3, size=(3840, 2160), radius=30.0)
+    points = _points(200, seed=1) + np.array([5.0, 0.0, -3.0])
+    recovered = triangulate_cameras(cameras, _pixels(cameras, points))
+    assert np.abs(recovered - points).max() < 1e-9
+
+
+def test_missing_views_give_nan_only_below_two_views() -> None:
+    cameras = _ring(4)
+    points = _points(400, seed=2)
+    pixels = _pixels(cameras, points)
+    missing = np.random.default_rng(3).random((4, 400)) < 0.5
+    pixels[missing] = np.nan
+    pixels[0, :10, 1] = np.nan  # half a NaN pixel is a missing view too
+    missing[0, :10] = True
+    views = (~missing).sum(axis=0)
+    assert set(views) == {0, 1, 2, 3, 4}
+    recovered = triangulate_cameras(cameras, pixels)
+    nan = np.isnan(recovered)
+    assert (nan.all(axis=1) == (views < 2)).all()
+    assert (nan.any(axis=1) == (views < 2)).all()
+    assert np.abs(recovered[views >= 2] - points[views >= 2]).max() < 1e-9
+
+
+def test_noisy_views_give_a_small_error() -> None:
+    cameras = [
+        Camera.look_at(f"cam{i}", (4.0 * np.sin(a), 1.5, 4.0 * np.cos(a)), (0, 1, 0), SIZE, 60.0)
+        for i, a in enumerate(np.radians([-37.5, 37.5]))
+    ]
+    points = _points(2000, seed=4)
+    pixels = _pixels(cameras, points) + np.random.default_rng(5).normal(0.0, 0.3, (2, 2000, 2))
+    error = np.linalg.norm(triangulate_cameras(cameras, pixels) - points, axis=1)
+    assert 0.001 < np.sqrt(np.mean(error**2)) < 0.03
+
+
+def test_batch_shapes_are_kept() -> None:
+    cameras = _ring(2)
+    points = _points(30, seed=6).reshape(5, 6, 3)
+    pixels = np.stack([camera.projection for camera in cameras])
+    recovered = triangulate(pixels, _pixels(cameras, points))
+    assert recovered.shape == (5, 6, 3)
+    assert np.abs(recovered - points).max() < 1e-9
+    assert triangulate(pixels, np.zeros((2, 0, 2))).shape == (0, 3)
+
+
+def test_bad_inputs_are_refused() -> None:
+    cameras = _ring(2)
+    projections = np.stack([camera.projection for camera in cameras])
+    with pytest.raises(ValueError, match="points"):
+        triangulate(projections, np.zeros((3, 4, 2)))
+    with pytest.raises(ValueError, match="projections"):
+        triangulate(projections[:, :, :3], np.zeros((2, 4, 2)))
+    distorted = Camera(
+        "wide",
+        (160, 120),
+        cameras[0].matrix,
+        cameras[0].rotation,
+        cameras[0].translation,
+        np.array([0.1, 0.0, 0.0, 0.0, 0.0]),
+    )
+    with pytest.raises(ValueError, match=r"wide.*distortion"):
+        triangulate_cameras([distorted, cameras[1]], np.zeros((2, 4, 2)))
