@@ -105,16 +105,16 @@ def _partial_origin_and_yaw(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Centroid of the present markers (n, 3) and yaw (n,) from the first complete pair."""
     count = present.sum(axis=1)
-    summed = np.where(present[..., None], markers, 0.0).sum(axis=1)
+    filled = np.where(present[..., None], markers, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        origin = summed / count[:, None]
-    yaw = np.zeros(len(markers))
-    undecided = np.ones(len(markers), dtype=bool)
-    for left, right in HEADING_PAIRS:
-        usable = undecided & present[:, left] & present[:, right]
-        line = markers[usable, left] - markers[usable, right]
-        yaw[usable] = np.arctan2(line[:, 2], line[:, 0])
-        undecided &= ~usable
+        origin = filled.sum(axis=1) / count[:, None]
+    left = [pair[0] for pair in HEADING_PAIRS]
+    right = [pair[1] for pair in HEADING_PAIRS]
+    complete = present[:, left] & present[:, right]  # (n, pairs)
+    first = np.argmax(complete, axis=1)
+    rows = np.arange(len(markers))
+    line = filled[rows, np.take(left, first)] - filled[rows, np.take(right, first)]
+    yaw = np.where(complete[rows, first], np.arctan2(line[:, 2], line[:, 0]), 0.0)
     return origin, yaw
 
 

@@ -18,6 +18,7 @@ from samba.errors import SambaError
 
 AREAS: dict[str, tuple[str, str]] = {
     "db": ("ingest.cli", "pose database: init, import, ls, show, label, rm, verify, stats, query"),
+    "eval": ("samba.eval_cli", "accuracy and speed of every reconstruction method on BVH takes"),
     "demo": ("db.demo", "build a database from built-in synthetic motions and query it"),
 }
 """Subcommand -> (module with `register(parser)`, one-line help)."""

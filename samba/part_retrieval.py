@@ -48,12 +48,14 @@ def refine_with_parts(
     markers: np.ndarray,
     poses: np.ndarray,
     k: int,
+    eps: float = 0.0,
     parts: Sequence[Part] = PARTS,
 ) -> np.ndarray:
     """Poses (b, 13, 3) with each part's joints blended towards its own estimate.
 
-    `markers` (b, 8, 3) world meters (NaN = missing). A frame whose part markers lack a
-    complete left/right pair keeps the main estimate for that part.
+    `markers` (b, 8, 3) world meters (NaN = missing); `k` neighbours per part, `eps` the
+    index query's approximation. A frame whose part markers lack a complete left/right
+    pair keeps the main estimate for that part.
     """
     out = np.array(poses, dtype=np.float64)
     for part in parts:
@@ -67,7 +69,7 @@ def refine_with_parts(
         ok &= present.sum(axis=1) >= 3
         if not ok.any():
             continue
-        estimate = part_estimate(source, masked[ok], k)
+        estimate = part_estimate(source, masked[ok], k, eps)
         joints = list(part.joints)
         blended = (1.0 - part.weight) * out[ok][:, joints] + part.weight * estimate[:, joints]
         rows = np.flatnonzero(ok)
@@ -75,7 +77,9 @@ def refine_with_parts(
     return out
 
 
-def part_estimate(source: NeighbourSource, markers: np.ndarray, k: int) -> np.ndarray:
+def part_estimate(
+    source: NeighbourSource, markers: np.ndarray, k: int, eps: float = 0.0
+) -> np.ndarray:
     """Kernel-weighted mean pose (b, 13, 3), world meters, of the k poses nearest to
     markers (b, 8, 3) over the markers present, each aligned by those markers.
 
@@ -83,7 +87,7 @@ def part_estimate(source: NeighbourSource, markers: np.ndarray, k: int) -> np.nd
     one's distance (at least 1 mm): close matches count, far ones fade.
     """
     scale = source.scale_by_tibia
-    distances, rows = source.query(markers, k=k)
+    distances, rows = source.query(markers, k=k, eps=eps)
     poses = np.asarray(source.poses[rows.reshape(-1)], dtype=np.float64)
     seen = markers_of(poses.reshape(len(markers), k, N_JOINTS, 3))
     seen = np.where(np.isnan(markers)[:, None], np.nan, seen).reshape(-1, N_MARKERS, 3)

@@ -157,6 +157,14 @@ class Reconstructor:
             self.config.k, self.config.n, self.config.noise_deg, self.config.seed
         )
         self._history: list[np.ndarray] = []
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Query once with every marker mask the parts use, so that an index building
+        masked trees lazily does it now rather than in the first live frames."""
+        if self.config.part_k:
+            markers = markers_of(standard_pose())[None]
+            refine_with_parts(self.source, markers, standard_pose()[None], 1, self.config.eps)
 
     def reset(self) -> None:
         """Forget the previous estimates."""
@@ -200,7 +208,7 @@ class Reconstructor:
         poses = poses.reshape(-1, N_JOINTS, 3)
         if self.config.part_k and len(frames):
             poses[frames] = refine_with_parts(
-                self.source, markers[frames], poses[frames], self.config.part_k
+                self.source, markers[frames], poses[frames], self.config.part_k, self.config.eps
             )
         diff = markers_of(poses) - markers
         squared = np.where(
