@@ -48,9 +48,16 @@ class LocalPoseSpace:
 
     @classmethod
     def from_samples(
-        cls, samples: np.ndarray, variance_kept: float = 1.0, variance_floor: float = 1e-6
+        cls,
+        samples: np.ndarray,
+        variance_kept: float = 1.0,
+        variance_floor: float = 1e-6,
+        weights: np.ndarray | None = None,
     ) -> LocalPoseSpace:
         """The spaces of sample poses (b, M, 13, 3) or (b, M, 39), meters.
+
+        `weights` (b, M) >= 0, when given, make mean and covariance weighted ones (a
+        sample of weight 0 does not count); None weighs every sample alike (the paper).
 
         `variance_kept` in (0, 1]: fraction of the total variance the kept principal
         components explain (1 keeps all 39 and needs no eigendecomposition: the sample
@@ -59,9 +66,13 @@ class LocalPoseSpace:
         """
         samples = np.asarray(samples, dtype=np.float64)
         samples = samples.reshape(*samples.shape[:2], POSE_DIMS)
-        mean = samples.mean(axis=1)
+        if weights is None:
+            weights = np.full(samples.shape[:2], 1.0 / samples.shape[1])
+        else:
+            weights = weights / weights.sum(axis=1, keepdims=True)
+        mean = np.einsum("bm,bmd->bd", weights, samples)
         centered = samples - mean[:, None]
-        cov = np.matmul(centered.transpose(0, 2, 1), centered) / samples.shape[1]
+        cov = np.matmul(centered.transpose(0, 2, 1), centered * weights[:, :, None])
         if variance_kept >= 1.0:
             diag = np.arange(POSE_DIMS)
             cov[:, diag, diag] += variance_floor

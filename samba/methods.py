@@ -29,6 +29,9 @@ BEST = ReconstructionConfig(
     marker_sigma=0.005,
     smooth_sigma=0.08,
     part_k=30,
+    bandwidth=2.0,
+    min_bandwidth=0.002,
+    eps=2.0,
 )
 """Our best configuration, chosen by leave-one-take-out evaluation (see README)."""
 

@@ -84,6 +84,8 @@ class ReconstructionConfig:
     seed: int = 0
     eps: float = 0.0
     part_k: int = 0
+    bandwidth: float = 0.0
+    min_bandwidth: float = 0.005
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.n < 1:
@@ -253,8 +255,20 @@ class Reconstructor:
         alignment, aligned, neighbours = self.neighbours(markers)
         samples = pseudo_poses(neighbours, self.noise)
         samples = samples.reshape(len(markers), -1, N_JOINTS, 3)
-        space = LocalPoseSpace.from_samples(samples, cfg.variance_kept, cfg.variance_floor)
+        weights = self.sample_weights(aligned, samples) if cfg.bandwidth else None
+        space = LocalPoseSpace.from_samples(samples, cfg.variance_kept, cfg.variance_floor, weights)
         return alignment, aligned, space, samples
+
+    def sample_weights(self, aligned: np.ndarray, samples: np.ndarray) -> np.ndarray:
+        """Kernel weights (b, M) of samples (b, M, 13, 3) by the distance d of their markers
+        to the aligned observation (b, 8, 3) over the markers present: exp(-(d / h)^2)
+        with h = `bandwidth` times the nearest sample's distance, at least
+        `min_bandwidth` meters."""
+        present = ~np.isnan(aligned).any(axis=-1)
+        diff = markers_of(samples) - np.nan_to_num(aligned)[:, None]
+        d2 = np.einsum("bmkc,bmkc,bk->bm", diff, diff, present.astype(float))
+        h2 = np.maximum(d2.min(axis=1) * self.config.bandwidth**2, self.config.min_bandwidth**2)
+        return np.exp(-d2 / h2[:, None])
 
     def _solve_batch(self, markers: np.ndarray, has_target: np.ndarray) -> _Solved:
         """Everything but the smoothness target, for usable frames (b, 8, 3); frames
