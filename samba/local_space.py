@@ -70,9 +70,10 @@ class LocalPoseSpace:
             weights = np.full(samples.shape[:2], 1.0 / samples.shape[1])
         else:
             weights = weights / weights.sum(axis=1, keepdims=True)
-        mean = np.einsum("bm,bmd->bd", weights, samples)
-        centered = samples - mean[:, None]
-        cov = np.matmul(centered.transpose(0, 2, 1), centered * weights[:, :, None])
+        weighted = samples * weights[:, :, None]
+        mean = weighted.sum(axis=1)
+        cov = np.matmul(weighted.transpose(0, 2, 1), samples)
+        cov -= mean[:, :, None] * mean[:, None, :]
         if variance_kept >= 1.0:
             diag = np.arange(POSE_DIMS)
             cov[:, diag, diag] += variance_floor

@@ -47,6 +47,8 @@ THETA1 = [0, 2, 4, 6, 8]
 """Columns of the first swing angle of the neck, l/r shoulder, l/r hip."""
 THETA2 = [1, 3, 5, 7, 9]
 """Columns of the second swing angle (about the bone) of the same chains."""
+FIXED_JOINTS = [1, 2, 7, 8]
+"""Joints no pseudo-pose rotation moves: the shoulders and hips."""
 CHAIN_ENDS = [0, *LIMB_ENDS]
 """The end of each chain (the head for the neck chain, whose lower part is empty)."""
 N_LIMB_NUMBERS = 7
@@ -166,17 +168,28 @@ def pseudo_poses(poses: np.ndarray, noise: AngleNoise) -> np.ndarray:
         ],
         axis=-1,
     )  # (..., K, 5, 7)
-    axes = np.stack([x, y, z], axis=-2)  # (..., K, 5, 3, 3)
-    lifted = (numbers[..., :, None, None] * axes[..., None, :, :]).reshape(
-        *numbers.shape[:-1], -1, 3
-    )
-    offsets = noise.coefficients @ lifted  # (..., K, 5, N * 2, 3)
-    offsets = offsets.reshape(*offsets.shape[:-2], n, 2, 3)
-    points = roots[..., :, None, None, :] + offsets  # (..., K, 5, N, 2, 3)
-    out = np.repeat(poses[..., :, None, :, :], n, axis=-3)
-    out[..., CHAIN_MIDS, :] = np.moveaxis(points[..., 0, :], -3, -2)
-    out[..., LIMB_ENDS, :] = np.moveaxis(points[..., 1:, :, 1, :], -3, -2)
-    return out
+    # One matrix product per (neighbour, chain) over the whole batch, whose coefficients
+    # (K, 5, 2N, 21) every frame shares: lift the numbers against the local axes into
+    # (K, 5, 21, B * 3) and multiply.
+    batch = poses.shape[:-3]
+    size = int(np.prod(batch))
+    numbers = np.moveaxis(numbers.reshape(size, k, 5, N_LIMB_NUMBERS), 0, -1)  # (K, 5, 7, B)
+    axes = np.moveaxis(np.stack([x, y, z], axis=-2).reshape(size, k, 5, 3, 3), 0, -2)
+    lifted = numbers[:, :, :, None, :, None] * axes[:, :, None]  # (K, 5, 7, 3, B, 3)
+    offsets = np.matmul(noise.coefficients, lifted.reshape(k, 5, -1, size * 3))
+    offsets = offsets.reshape(k, 5, n, 2, size, 3)
+    flat_poses = poses.reshape(size, k, N_JOINTS, 3)
+    flat_roots = roots.reshape(size, k, 5, 3)
+    out = np.empty((size, k, n, N_JOINTS, 3))
+    for joint in FIXED_JOINTS:
+        out[:, :, :, joint] = flat_poses[:, :, None, joint]
+    for chain, joint in enumerate(CHAIN_MIDS):
+        moved = offsets[:, chain, :, 0].transpose(2, 0, 1, 3)  # (B, K, N, 3)
+        np.add(flat_roots[:, :, None, chain], moved, out=out[:, :, :, joint])
+    for chain, joint in enumerate(LIMB_ENDS, start=1):
+        moved = offsets[:, chain, :, 1].transpose(2, 0, 1, 3)
+        np.add(flat_roots[:, :, None, chain], moved, out=out[:, :, :, joint])
+    return out.reshape(*batch, k, n, N_JOINTS, 3)
 
 
 def _perpendicular(z: np.ndarray, v: np.ndarray) -> np.ndarray:

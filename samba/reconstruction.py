@@ -264,9 +264,9 @@ class Reconstructor:
         to the aligned observation (b, 8, 3) over the markers present: exp(-(d / h)^2)
         with h = `bandwidth` times the nearest sample's distance, at least
         `min_bandwidth` meters."""
-        present = ~np.isnan(aligned).any(axis=-1)
+        present = (~np.isnan(aligned).any(axis=-1)).astype(np.float64)
         diff = markers_of(samples) - np.nan_to_num(aligned)[:, None]
-        d2 = np.einsum("bmkc,bmkc,bk->bm", diff, diff, present.astype(float))
+        d2 = np.matmul(np.square(diff).sum(axis=-1), present[:, :, None])[:, :, 0]
         h2 = np.maximum(d2.min(axis=1) * self.config.bandwidth**2, self.config.min_bandwidth**2)
         return np.exp(-d2 / h2[:, None])
 
