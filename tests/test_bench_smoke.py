@@ -25,3 +25,18 @@ def test_database_benchmark_prints_its_tables(
     for heading in ("Import:", "k=10 nearest poses", "one marker missing", "Store of 3000 poses"):
         assert heading in out
     assert "baseline: cKDTree raw 24-D" in out and "index, exact" in out
+
+
+_spec_rec = importlib.util.spec_from_file_location(
+    "bench_reconstruction", ROOT / "bench" / "bench_reconstruction.py"
+)
+bench_reconstruction = importlib.util.module_from_spec(_spec_rec)
+_spec_rec.loader.exec_module(bench_reconstruction)
+
+
+def test_reconstruction_benchmark_prints_its_table(capsys: pytest.CaptureFixture[str]) -> None:
+    rows = bench_reconstruction.bench(40, ["nn", "samba", "best"])
+    out = capsys.readouterr().out
+    assert "paper: 23.5 ms per frame" in out and "batch f/s" in out
+    assert [r[0] for r in rows] == ["nn", "samba", "best"]
+    assert all(float(r[2]) > 0 and float(r[6]) > 0 for r in rows)

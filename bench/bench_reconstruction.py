@@ -1,0 +1,125 @@
+"""Reconstruction speed: time per frame of the live path and throughput of the batch path.
+
+Run from the project root:  python bench/bench_reconstruction.py [--frames 2000]
+
+Single-threaded by construction: BLAS is limited to one thread (threadpoolctl) and the
+process pins itself to one core where the OS allows it. The database is the shared CMU
+data (../shared/data or $SAMBA_DATA) without one take, which is observed through the
+EVALUATION.md cameras; without the data, the built-in synthetic motions stand in (and
+the table says so). Every method runs on the same frames in the same run; the `nn`
+baseline and the paper's 23.5 ms per frame are printed beside each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from db.index import PoseIndex  # noqa: E402
+from ingest.bvh_take import load_bvh_take  # noqa: E402
+from samba.evaluation import capture_take  # noqa: E402
+from samba.methods import METHODS  # noqa: E402
+from samba.skeleton import mirror_poses  # noqa: E402
+from samba.synthetic import generate, library  # noqa: E402
+
+PAPER_MS = 23.5
+"""The paper's time per frame (K = 10, N = 10, Section 6.2)."""
+
+
+def database_and_test(max_frames: int) -> tuple[str, np.ndarray, np.ndarray]:
+    """(source label, database poses (n, 13, 3), test markers (F, 8, 3))."""
+    env = os.environ.get("SAMBA_DATA")
+    for base in ([Path(env)] if env else []) + [ROOT.parent / "shared" / "data"]:
+        files = sorted((base / "cmu").glob("*.bvh"))
+        if files:
+            takes = [load_bvh_take(f) for f in files]
+            test = np.concatenate([t.poses for t in takes[:3]])[:max_frames]
+            database = np.concatenate([t.poses for t in takes[3:]])
+            label = f"CMU: {len(takes) - 3} takes in the database, 3 takes observed"
+            return label, database, capture_take("test", test, seed=0).markers
+    database = np.concatenate([t.poses for t in library(takes_per_motion=6, seconds=10)])
+    test = generate("kick", seconds=max_frames / 30, fps=30, seed=99).poses
+    return "synthetic motions (no CMU data found)", database, capture_take("t", test, 0).markers
+
+
+def time_live(reconstructor, markers: np.ndarray) -> np.ndarray:
+    """Seconds per frame (F,) of `step`, frame by frame, after a 20-frame warm-up."""
+    for frame in markers[:20]:
+        reconstructor.step(frame)
+    reconstructor.reset()
+    seconds = np.empty(len(markers))
+    for i, frame in enumerate(markers):
+        start = time.perf_counter()
+        reconstructor.step(frame)
+        seconds[i] = time.perf_counter() - start
+    return seconds
+
+
+def time_batch(reconstructor, markers: np.ndarray, repeats: int = 3) -> float:
+    """Frames per second of `reconstruct` on the whole sequence (best of `repeats`)."""
+    best = np.inf
+    for _ in range(repeats):
+        reconstructor.reset()
+        start = time.perf_counter()
+        reconstructor.reconstruct(markers)
+        best = min(best, time.perf_counter() - start)
+    return len(markers) / best
+
+
+def bench(max_frames: int, methods: list[str]) -> list[list[object]]:
+    """Measure every method; prints and returns the table rows."""
+    label, database, markers = database_and_test(max_frames)
+    plain = PoseIndex.build(database)
+    mirrored = PoseIndex.build(np.concatenate([database, mirror_poses(database)]))
+    rows: list[list[object]] = []
+    nn_p50 = None
+    for name in methods:
+        method = METHODS[name]
+        index = mirrored if method.mirrored_database else plain
+        reconstructor = method.build(index)
+        live = time_live(reconstructor, markers)
+        p50, p99 = np.median(live) * 1e3, np.percentile(live, 99) * 1e3
+        nn_p50 = p50 if name == "nn" else nn_p50
+        rows.append(
+            [
+                name,
+                f"{len(index)}",
+                f"{p50:.3f}",
+                f"{p99:.3f}",
+                f"{p50 / nn_p50:.1f}x" if nn_p50 else "-",
+                f"{PAPER_MS / p50:.0f}x",
+                f"{time_batch(reconstructor, markers):.0f}",
+            ]
+        )
+    header = ["method", "poses", "p50 ms", "p99 ms", "p50 / nn", "paper / p50", "batch f/s"]
+    print(f"Reconstruction, one core, {len(markers)} frames; {label}")
+    print(f"paper: {PAPER_MS} ms per frame (K = 10, N = 10)")
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    for row in [header, *rows]:
+        print("  ".join(str(c).rjust(w) for c, w in zip(row, widths, strict=True)))
+    return rows
+
+
+def main() -> None:
+    """Command line entry."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=2000, help="test frames (default 2000)")
+    parser.add_argument("--methods", default="nn,chai,samba,best", help="comma-separated")
+    args = parser.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    with threadpool_limits(limits=1):
+        bench(args.frames, args.methods.split(","))
+
+
+if __name__ == "__main__":
+    main()
