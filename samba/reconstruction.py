@@ -58,7 +58,8 @@ class NeighbourSource(Protocol):
 
 @dataclass(frozen=True)
 class ReconstructionConfig:
-    """Parameters of the reconstruction; the defaults are the paper's configuration.
+    """Parameters of the reconstruction; the defaults are the paper's configuration
+    (`samba.methods.PAPER`, which says how the values the paper leaves open were chosen).
 
     `k` neighbours and `n` pseudo-poses each (n = 1: none, the neighbours alone), joint
     noise `noise_deg` (standard deviation, degrees), PCA truncation `variance_kept`
@@ -75,10 +76,10 @@ class ReconstructionConfig:
     k: int = 10
     n: int = 10
     noise_deg: float = 5.0
-    variance_kept: float = 0.95
+    variance_kept: float = 0.999
     variance_floor: float = 1e-6
-    marker_sigma: float = 0.01
-    smooth_sigma: float = 0.02
+    marker_sigma: float = 0.005
+    smooth_sigma: float = 0.08
     min_markers: int = 3
     confident_residual: float = 0.03
     seed: int = 0
