@@ -349,7 +349,5 @@ def _yaw_blocks(yaw: np.ndarray) -> np.ndarray:
     block[:, 1, 1] = 1.0
     block[:, 2, 0] = -s
     block[:, 2, 2] = c
-    out = np.zeros((len(yaw), N_JOINTS, 3, N_JOINTS, 3))
-    for j in range(N_JOINTS):
-        out[:, j, :, j, :] = block
+    out = np.einsum("jk,bxy->bjxky", np.eye(N_JOINTS), block)
     return out.reshape(len(yaw), POSE_DIMS, POSE_DIMS)
