@@ -38,7 +38,9 @@ from samba.skeleton import N_MARKERS, markers_of
 FORMAT = 2
 DEFAULT_DIMS = 14
 LEAF_SIZE = 32
-MAX_MASK_TREES = 12
+MAX_MASK_TREES = 40
+"""Masked trees kept (least recently used dropped): enough for every pattern of one or two
+missing markers (8 + 28), which random dropout of 10% of the markers keeps asking for."""
 APPROXIMATE_EPS = 0.75
 """The eps of approximate queries that keeps recall@10 >= 0.99 at 10^6 poses (bench_db)."""
 EXACT_FETCH = 2
