@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from samba.camera import Camera
-from samba.triangulation import triangulate, triangulate_cameras
+from samba.triangulation import Triangulation, triangulate, triangulate_cameras
 
 SIZE = (160, 120)
 
@@ -102,3 +102,64 @@ def test_bad_inputs_are_refused() -> None:
     )
     with pytest.raises(ValueError, match=r"wide.*distortion"):
         triangulate_cameras([distorted, cameras[1]], np.zeros((2, 4, 2)))
+
+
+def _projections(cameras: list[Camera]) -> np.ndarray:
+    return np.stack([camera.projection for camera in cameras])
+
+
+def test_reprojection_errors_are_reported_per_view_and_per_point() -> None:
+    cameras = _ring(3, size=(640, 480))
+    points = _points(300, seed=3)
+    pixels = _pixels(cameras, points)
+    pixels[1, :10] = np.nan  # camera 1 misses the first ten points
+    result = Triangulation.from_views(_projections(cameras), pixels)
+    assert np.abs(result.points - points).max() < 1e-9
+    assert result.error.shape == (300,) and np.nanmax(result.error) < 1e-6
+    assert np.isnan(result.view_error[1, :10]).all() and not result.views[1, :10].any()
+    assert result.views[:, 10:].all()
+
+
+def test_gating_drops_outlier_views_and_keeps_the_point() -> None:
+    rng = np.random.default_rng(4)
+    cameras = _ring(4, size=(640, 480))
+    points = _points(400, seed=4)
+    pixels = _pixels(cameras, points) + rng.normal(0.0, 0.3, (4, 400, 2))
+    pixels[2, :50] += 35.0  # a wrong blob in camera 2
+    plain = np.linalg.norm(triangulate(_projections(cameras), pixels) - points, axis=-1)
+    gated = Triangulation.from_views(_projections(cameras), pixels, refine=True, gate_px=3.0)
+    error = np.linalg.norm(gated.points - points, axis=-1)
+    assert not gated.views[2, :50].any() and gated.views[:, 50:].all()
+    assert error[:50].mean() < 0.2 * plain[:50].mean()
+    assert error.mean() < 0.01 and np.nanmax(gated.error) < 3.0
+
+
+def test_gating_never_drops_below_two_views() -> None:
+    cameras = _ring(2, size=(640, 480))
+    points = _points(20, seed=5)
+    pixels = _pixels(cameras, points)
+    pixels[0] += 50.0
+    gated = Triangulation.from_views(_projections(cameras), pixels, gate_px=1.0)
+    assert gated.views.all() and np.isfinite(gated.points).all()
+    assert (gated.error > 1.0).all()
+
+
+def test_refinement_lowers_the_reprojection_error() -> None:
+    rng = np.random.default_rng(6)
+    cameras = _ring(4, size=(320, 240))
+    points = _points(500, seed=6)
+    pixels = _pixels(cameras, points) + rng.normal(0.0, 1.0, (4, 500, 2))
+    plain = Triangulation.from_views(_projections(cameras), pixels)
+    refined = Triangulation.from_views(_projections(cameras), pixels, refine=True)
+    assert (refined.error <= plain.error + 1e-9).all()
+    assert refined.error.mean() < plain.error.mean()
+
+
+def test_triangulation_keeps_batch_shapes() -> None:
+    cameras = _ring(3)
+    points = _points(24, seed=7).reshape(3, 8, 3)
+    pixels = np.stack([camera.project(points) for camera in cameras])
+    result = Triangulation.from_views(_projections(cameras), pixels, refine=True, gate_px=2.0)
+    assert result.points.shape == (3, 8, 3) and result.error.shape == (3, 8)
+    assert result.views.shape == (3, 3, 8) and result.view_error.shape == (3, 3, 8)
+    assert np.abs(result.points - points).max() < 1e-9
