@@ -8,6 +8,7 @@ q = p + U w (Eq. 1), and the energy of w is, with squared terms,
     E(w) = sum_j w_j^2 / lambda_j                      prior, Mahalanobis (Eq. 3)
          + alpha * |S (p + U w) - x|^2                 markers present (Eq. 4)
          + beta  * |p + U w - (2 q_{i-1} - q_{i-2})|^2   smoothness (Eq. 5)
+         + beta_missing * (the same over the joints of missing markers)
 
 where x holds the observed markers and S selects the coordinates of the markers present.
 The energy is linear least squares in w, so `solve` finds the exact minimiser with one
@@ -105,7 +106,8 @@ class EnergyTerms:
     `markers` (b, 8, 3) observed markers in the canonical frame (NaN = missing),
     `target` (b, 13, 3) the smoothness target 2 q_{i-1} - q_{i-2} (any values where
     `has_target` is False), `has_target` (b,) bool, `alpha` marker weight in 1/m^2,
-    `beta` smoothness weight in 1/m^2.
+    `beta` smoothness weight in 1/m^2, `beta_missing` extra smoothness weight (1/m^2) on
+    the joints whose markers are missing: there the motion predicts the marker.
     """
 
     markers: np.ndarray
@@ -113,6 +115,7 @@ class EnergyTerms:
     has_target: np.ndarray
     alpha: float
     beta: float
+    beta_missing: float = 0.0
 
     def marker_mask(self) -> np.ndarray:
         """(b, 39) 1.0 at the coordinates of the markers present, else 0.0."""
@@ -128,27 +131,31 @@ class EnergyTerms:
         return x
 
     def betas(self) -> np.ndarray:
-        """(b,) the smoothness weight of each frame (0 without a target)."""
-        return np.where(self.has_target, self.beta, 0.0)
+        """(b, 39) the smoothness weight of every coordinate: beta, plus `beta_missing`
+        on the joints of missing markers; 0 in frames without a target."""
+        missing = np.repeat(np.isnan(self.markers).any(axis=-1), 3, axis=1)
+        weights = np.full((len(self.markers), POSE_DIMS), self.beta)
+        weights[:, MARKER_COORDS] += self.beta_missing * missing
+        return np.where(self.has_target[:, None], weights, 0.0)
 
 
 def affine_solution(space: LocalPoseSpace, terms: EnergyTerms) -> tuple[np.ndarray, np.ndarray]:
     """The exact minimiser as an affine function of the smoothness target t (b, 39):
     q = offset + gain @ t, with offset (b, 39) and gain (b, 39, 39), canonical frame.
 
-    Setting the gradient to zero gives (C^-1 + alpha D + beta I) q = C^-1 p + alpha D x
-    + beta t for covariance C and marker selection D; multiplied by C it needs no
-    inverse: (I + C (alpha D + beta I)) q = p + alpha C D x + beta C t, one LAPACK solve
+    Setting the gradient to zero gives (C^-1 + alpha D + B) q = C^-1 p + alpha D x + B t
+    for covariance C, marker selection D and smoothness weights B (diagonal); multiplied
+    by C it needs no inverse: (I + C (alpha D + B)) q = p + alpha C D x + C B t, one solve
     for the offset and the gain together.
     """
     mask = terms.marker_mask()
     beta = terms.betas()
     cov = space.covariance
-    system = cov * (terms.alpha * mask + beta[:, None])[:, None, :]
+    system = cov * (terms.alpha * mask + beta)[:, None, :]
     diag = np.arange(POSE_DIMS)
     system[:, diag, diag] += 1.0
     offset_rhs = space.mean + terms.alpha * np.einsum("bij,bj->bi", cov, mask * terms.observed())
-    rhs = np.concatenate([offset_rhs[:, :, None], beta[:, None, None] * cov], axis=2)
+    rhs = np.concatenate([offset_rhs[:, :, None], cov * beta[:, None, :]], axis=2)
     x = np.linalg.solve(system, rhs)
     return x[:, :, 0], x[:, :, 1:]
 
@@ -200,7 +207,9 @@ def solve_lm(
             [sqrt_prior * w, sqrt_alpha * (q - x)[mask], sqrt_beta * (q - target)]
         )
 
-    jacobian = np.concatenate([np.diag(sqrt_prior), sqrt_alpha * u[mask], sqrt_beta * u])
+    jacobian = np.concatenate(
+        [np.diag(sqrt_prior), sqrt_alpha * u[mask], sqrt_beta[:, None] * u]
+    )
     result = least_squares(
         residuals,
         w0[kept],

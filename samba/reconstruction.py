@@ -69,8 +69,10 @@ class ReconstructionConfig:
     left/right pair are needed to reconstruct; a frame is confident when its marker RMS
     residual is at most `confident_residual` meters with at least 6 markers. `seed` fixes
     the pseudo-pose noise table; `eps` is passed to the index query (0 = exact).
-    `part_k` > 0 re-estimates elbows and hips from their own `part_k` nearest poses
-    (`samba.part_retrieval`); 0 keeps the paper's single retrieval.
+    `part_k` > 0 re-estimates elbows, hips and head from their own `part_k` nearest poses
+    (`samba.part_retrieval`); 0 keeps the paper's single retrieval. `missing_sigma` > 0
+    (meters) holds the joint of a missing marker to its motion prediction with weight
+    1 / missing_sigma^2 on top of the smoothness term; 0 leaves it to the pose space.
     """
 
     k: int = 10
@@ -85,6 +87,7 @@ class ReconstructionConfig:
     seed: int = 0
     eps: float = 0.0
     part_k: int = 0
+    missing_sigma: float = 0.0
     bandwidth: float = 0.0
     min_bandwidth: float = 0.005
 
@@ -105,6 +108,11 @@ class ReconstructionConfig:
     def beta(self) -> float:
         """Smoothness-term weight, 1/m^2."""
         return 1.0 / self.smooth_sigma**2
+
+    @property
+    def beta_missing(self) -> float:
+        """Extra smoothness weight on the joints of missing markers, 1/m^2 (0: none)."""
+        return 1.0 / self.missing_sigma**2 if self.missing_sigma > 0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -277,7 +285,12 @@ class Reconstructor:
         alignment, aligned, space, _ = self.local_spaces(markers)
         cfg = self.config
         terms = EnergyTerms(
-            aligned, np.zeros((len(markers), N_JOINTS, 3)), has_target, cfg.alpha, cfg.beta
+            aligned,
+            np.zeros((len(markers), N_JOINTS, 3)),
+            has_target,
+            cfg.alpha,
+            cfg.beta,
+            cfg.beta_missing,
         )
         offset, gain = affine_solution(space, terms)
         # To world: q_w = o + R^T q_c / s with q_c = offset + gain @ (s R (t_w - o)).
@@ -320,7 +333,10 @@ class Reconstructor:
         alignment, aligned, space, samples = self.local_spaces(markers[None])
         has_target = target is not None
         t = alignment.apply(target[None]) if has_target else np.zeros((1, N_JOINTS, 3))
-        terms = EnergyTerms(aligned, t, np.array([has_target]), self.config.alpha, self.config.beta)
+        cfg = self.config
+        terms = EnergyTerms(
+            aligned, t, np.array([has_target]), cfg.alpha, cfg.beta, cfg.beta_missing
+        )
         w0 = initial_weights(space, samples[0], aligned[0])
         pose = solve_lm(space, terms, w0)
         return alignment.invert(pose[None])[0]
