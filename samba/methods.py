@@ -30,6 +30,7 @@ BEST = ReconstructionConfig(
     noise_deg=15.0,
     variance_kept=1.0,
     part_k=30,
+    missing_sigma=0.02,
     bandwidth=2.0,
     min_bandwidth=0.002,
     eps=2.0,
