@@ -1,4 +1,5 @@
-"""`Camera`: a calibrated pinhole camera with OpenCV lens distortion.
+"""`Camera`: a calibrated pinhole camera with OpenCV lens distortion; `CameraGroup`: the
+ordered, uniquely named cameras of one capture stage.
 
 Conventions:
 
@@ -15,18 +16,39 @@ Conventions:
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+UNDISTORT_ITERATIONS = 20
+"""Newton steps `Camera.undistort` takes at most."""
+UNDISTORT_TOLERANCE = 1e-12
+"""Residual (normalised image units) below which `Camera.undistort` has converged."""
+
 
 def _readonly(array: np.ndarray) -> np.ndarray:
     array = np.array(array, dtype=np.float64)
     array.flags.writeable = False
     return array
+
+
+def distort(x: np.ndarray, y: np.ndarray, distortion: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's radial and tangential lens distortion of normalised image coordinates.
+
+    x, y (...) are the camera-frame x / z and y / z; `distortion` (..., 5) holds
+    (k1, k2, p1, p2, k3), broadcast against x and y (one row per point, or one for all).
+    Returns the distorted (x, y), which the intrinsics matrix takes to pixels.
+    """
+    k1, k2, p1, p2, k3 = np.moveaxis(np.asarray(distortion, dtype=np.float64), -1, 0)
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    return (
+        x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+        y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+    )
 
 
 def _check_size(name: str, size: tuple[int, int]) -> tuple[int, int]:
@@ -166,14 +188,61 @@ class Camera:
         with np.errstate(invalid="ignore", divide="ignore"):
             z = np.where(z > 0.0, z, np.nan)
             x, y = cam[..., 0] / z, cam[..., 1] / z
-        k1, k2, p1, p2, k3 = self.distortion
         if self.has_distortion:
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            x, y = (
-                x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-                y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
-            )
+            x, y = self._distort(x, y)
+        return self._to_pixels(x, y)
+
+    def undistort(self, uv: np.ndarray) -> np.ndarray:
+        """Undistorted pixels (..., 2) of distorted pixels uv (..., 2) of this camera.
+
+        The result is where the pinhole camera without lens distortion (same `matrix`,
+        pose and size) sees the same ray, so ``undistort(project(X))`` equals the
+        projection of X by the `projection` matrix. The inverse of the distortion is
+        found per point by Newton's method from the distorted position; NaN pixels,
+        and pixels where it does not converge (far outside the image of a strongly
+        distorting lens), give NaN.
+        """
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.shape[-1:] != (2,):
+            raise ValueError(f"camera {self.name!r}: pixels must be (..., 2), got {uv.shape}")
+        if not self.has_distortion:
+            return uv.copy()
+        homogeneous = np.concatenate([uv, np.ones_like(uv[..., :1])], axis=-1)
+        normalised = homogeneous @ np.linalg.inv(self.matrix).T
+        xd, yd = normalised[..., 0] / normalised[..., 2], normalised[..., 1] / normalised[..., 2]
+        x, y = xd.copy(), yd.copy()
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            for _ in range(UNDISTORT_ITERATIONS + 1):
+                fx, fy = self._distort(x, y)
+                ex, ey = fx - xd, fy - yd
+                converged = np.hypot(ex, ey) <= UNDISTORT_TOLERANCE * (1.0 + np.hypot(x, y))
+                if (converged | np.isnan(ex)).all():
+                    break
+                (a, b), (c, d) = self._distort_jacobian(x, y)
+                det = a * d - b * c
+                x, y = x - (d * ex - b * ey) / det, y - (a * ey - c * ex) / det
+        return np.where(converged[..., None], self._to_pixels(x, y), np.nan)
+
+    def _distort(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`distort` with this camera's coefficients."""
+        return distort(x, y, self.distortion)
+
+    def _distort_jacobian(
+        self, x: np.ndarray, y: np.ndarray
+    ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """The 2x2 Jacobian ((dxd/dx, dxd/dy), (dyd/dx, dyd/dy)) of `_distort` at x, y (...)."""
+        k1, k2, p1, p2, k3 = self.distortion
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        slope = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)  # d radial / d r2
+        cross = 2.0 * x * y * slope + 2.0 * p1 * x + 2.0 * p2 * y
+        return (
+            (radial + 2.0 * x * x * slope + 2.0 * p1 * y + 6.0 * p2 * x, cross),
+            (cross, radial + 2.0 * y * y * slope + 6.0 * p1 * y + 2.0 * p2 * x),
+        )
+
+    def _to_pixels(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Pixels (..., 2) of normalised (distorted) image coordinates x, y (...)."""
         k = self.matrix
         w = k[2, 0] * x + k[2, 1] * y + k[2, 2]
         u = (k[0, 0] * x + k[0, 1] * y + k[0, 2]) / w
@@ -186,3 +255,72 @@ class Camera:
         width, height = self.size
         u, v = uv[..., 0], uv[..., 1]
         return (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
+
+
+@dataclass(frozen=True, eq=False)
+class CameraGroup:
+    """The cameras of one capture stage, in a fixed order, with unique names.
+
+    Camera i of the group is camera i of every per-camera batch, such as the pixels
+    (c, ..., 2) that `project` returns and triangulation takes. Index a group by
+    position or by name; `len` and iteration follow the order.
+    """
+
+    cameras: tuple[Camera, ...]
+
+    def __post_init__(self) -> None:
+        cameras = tuple(self.cameras)
+        if not cameras:
+            raise ValueError("a camera group needs at least one camera")
+        for camera in cameras:
+            if not isinstance(camera, Camera):
+                raise ValueError(f"a camera group holds Camera objects, got {camera!r}")
+        names = [camera.name for camera in cameras]
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise ValueError(f"camera names must be unique, repeated: {', '.join(repeated)}")
+        object.__setattr__(self, "cameras", cameras)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The cameras' names, in order."""
+        return tuple(camera.name for camera in self.cameras)
+
+    @cached_property
+    def projections(self) -> np.ndarray:
+        """The (c, 3, 4) projection matrices K [R | t] (distortion not included)."""
+        return _readonly(np.stack([camera.projection for camera in self.cameras]))
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Pixels (c, ..., 2) of world points (..., 3), meters, in each of the c cameras.
+
+        With distortion; NaN where a point is behind a camera (see `Camera.project`).
+        """
+        return np.stack([camera.project(points) for camera in self.cameras])
+
+    def undistort(self, uv: np.ndarray) -> np.ndarray:
+        """Undistorted pixels (c, ..., 2) of distorted pixels uv (c, ..., 2), camera by camera.
+
+        See `Camera.undistort`; NaN stays NaN.
+        """
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.ndim < 2 or uv.shape[0] != len(self) or uv.shape[-1] != 2:
+            raise ValueError(f"pixels must be ({len(self)}, ..., 2), got {uv.shape}")
+        return np.stack([camera.undistort(p) for camera, p in zip(self.cameras, uv, strict=True)])
+
+    def index(self, name: str) -> int:
+        """The position of the camera called `name`; KeyError if there is none."""
+        for i, camera in enumerate(self.cameras):
+            if camera.name == name:
+                return i
+        raise KeyError(f"no camera named {name!r}; cameras: {', '.join(self.names)}")
+
+    def __getitem__(self, key: int | str) -> Camera:
+        """Camera by position (int) or by name (str)."""
+        return self.cameras[self.index(key) if isinstance(key, str) else key]
+
+    def __len__(self) -> int:
+        return len(self.cameras)
+
+    def __iter__(self) -> Iterator[Camera]:
+        return iter(self.cameras)

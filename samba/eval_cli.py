@@ -12,8 +12,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +24,7 @@ from db.index import PoseIndex
 from ingest.batch import expand_paths
 from ingest.bvh_take import load_bvh_take
 from samba import eval_report
+from samba.atomic_file import write_text_atomic
 from samba.errors import InputError
 from samba.eval_report import SweepPoint
 from samba.evaluation import TakeErrors, capture_take, run_method, summarize
@@ -287,7 +286,7 @@ def _run(args: argparse.Namespace) -> int:
                 for axis, points in sweeps.items()
             },
         }
-        _write_atomic(Path(args.json), json.dumps(document, indent=1) + "\n")
+        write_text_atomic(args.json, json.dumps(document, indent=1) + "\n")
         print(f"wrote {args.json}")
     if args.plots:
         _plot(Path(args.plots), evaluation, main, sweeps, summaries)
@@ -352,18 +351,6 @@ def _settings(
             for label, m in runs.items()
         },
     }
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    """Write text to path through a temporary file in the same folder and os.replace."""
-    fd, tmp = tempfile.mkstemp(dir=path.resolve().parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
 
 
 def _plot(

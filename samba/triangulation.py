@@ -10,7 +10,8 @@ nothing; a point seen by fewer than two cameras is NaN.
 `Triangulation.from_views` adds what the live server needs: the reprojection error of
 every view, gating of outlier views (a view more than `gate_px` off is dropped while at
 least two views remain, worst first), and optional Gauss-Newton refinement of the
-reprojection error. Pixels must be undistorted (pinhole) coordinates.
+reprojection error. Pixels must be undistorted (pinhole) coordinates;
+`triangulate_cameras` undistorts raw pixels of `Camera`s first.
 """
 
 from __future__ import annotations
@@ -100,21 +101,19 @@ class Triangulation:
 
 
 def triangulate_cameras(cameras: Sequence[Camera], points: np.ndarray) -> np.ndarray:
-    """World points (n, 3) in meters from pixels (c, n, 2) seen by `cameras` (c of them).
+    """World points (n, 3) in meters from raw pixels (c, n, 2) seen by `cameras`.
 
-    The pixels must be undistorted (pinhole) coordinates, NaN where a camera misses the
-    point; points seen by fewer than two cameras are NaN. Cameras with non-zero
-    distortion are refused with ValueError until undistortion exists.
+    Each camera's pixels are undistorted first (`Camera.undistort`), then triangulated by
+    DLT; NaN where a camera misses the point, and points seen by fewer than two cameras
+    are NaN. Any batch shape works, as for `triangulate`.
     """
-    for camera in cameras:
-        if camera.has_distortion:
-            raise ValueError(
-                f"camera {camera.name!r} has lens distortion; triangulate_cameras needs "
-                "undistorted pixels and distortion-free cameras"
-            )
     if len(cameras) == 0:
         raise ValueError("triangulate_cameras needs at least one camera")
-    return triangulate(np.stack([camera.projection for camera in cameras]), points)
+    points = np.asarray(points, dtype=np.float64)
+    if points.shape[:1] != (len(cameras),):
+        raise ValueError(f"points must be ({len(cameras)}, ..., 2), got {points.shape}")
+    pinhole = np.stack([camera.undistort(uv) for camera, uv in zip(cameras, points, strict=True)])
+    return triangulate(np.stack([camera.projection for camera in cameras]), pinhole)
 
 
 def _check(

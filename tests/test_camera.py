@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from samba.camera import Camera
+from samba.camera import Camera, CameraGroup
 
 SIZE = (160, 120)
 CENTRE = ((SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2)
@@ -162,3 +162,79 @@ def test_camera_is_immutable() -> None:
     camera = Camera("c", SIZE, np.eye(3), rotation, np.zeros(3))
     rotation[0] = 5.0
     assert camera.rotation[0] == 0.1
+
+
+LENSES = (
+    [-0.25, 0.08, 0.0, 0.0, -0.01],  # strong barrel
+    [0.1, -0.02, 0.0, 0.0, 0.0],  # pincushion
+    [-0.2, 0.05, 0.001, -0.002, 0.01],  # with tangential terms
+)
+
+
+def _lens_camera(distortion: list[float]) -> Camera:
+    return Camera(
+        name="lens",
+        size=(640, 480),
+        matrix=np.array([[500.0, 0.0, 321.0], [0.0, 510.0, 238.0], [0.0, 0.0, 1.0]]),
+        rotation=np.array([0.1, -0.2, 0.05]),
+        translation=np.array([0.1, -0.3, 2.0]),
+        distortion=np.array(distortion),
+    )
+
+
+@pytest.mark.parametrize("distortion", LENSES)
+def test_undistort_inverts_the_distortion_of_project(distortion: list[float]) -> None:
+    camera = _lens_camera(distortion)
+    points = np.random.default_rng(3).uniform(-1.0, 1.0, (4000, 3))
+    distorted = camera.project(points)
+    inside = camera.in_image(distorted)
+    homogeneous = np.hstack([points, np.ones((len(points), 1))]) @ camera.projection.T
+    pinhole = homogeneous[:, :2] / homogeneous[:, 2:]
+    undistorted = camera.undistort(distorted[inside])
+    assert inside.sum() > 1000
+    assert np.abs(undistorted - pinhole[inside]).max() < 1e-6
+
+
+def test_undistort_agrees_with_opencv_and_keeps_nan_and_shape() -> None:
+    cv2 = pytest.importorskip("cv2")
+    camera = _lens_camera(LENSES[2])
+    grid = np.stack(np.meshgrid(np.arange(0, 640, 40.0), np.arange(0, 480, 40.0)), axis=-1)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    expected = cv2.undistortImagePoints(
+        grid.reshape(-1, 1, 2), camera.matrix, camera.distortion, criteria
+    ).reshape(grid.shape)
+    undistorted = camera.undistort(grid)
+    assert undistorted.shape == grid.shape
+    # OpenCV's fixed-point iteration stops short at the corners of the image (~0.01 px).
+    np.testing.assert_allclose(undistorted, expected, atol=0.05)
+    batch = np.array([[[np.nan, 5.0], [100.0, 200.0]]])
+    out = camera.undistort(batch)
+    assert out.shape == (1, 2, 2) and np.isnan(out[0, 0]).all() and np.isfinite(out[0, 1]).all()
+    plain = _front_camera()
+    np.testing.assert_array_equal(plain.undistort(grid), grid)
+
+
+def test_camera_group_orders_names_and_projects_in_batches() -> None:
+    cameras = [
+        Camera.look_at(f"c{i}", (3.0 * np.sin(a), 1.5, 3.0 * np.cos(a)), (0, 1, 0), SIZE, 60.0)
+        for i, a in enumerate((0.0, 1.0, 2.0))
+    ]
+    group = CameraGroup(cameras)
+    assert len(group) == 3 and group.names == ("c0", "c1", "c2")
+    assert [c.name for c in group] == ["c0", "c1", "c2"]
+    assert group["c1"] is cameras[1] and group[2] is cameras[2] and group.index("c2") == 2
+    with pytest.raises(KeyError, match="c9"):
+        group["c9"]
+    assert group.projections.shape == (3, 3, 4)
+    np.testing.assert_array_equal(group.projections[1], cameras[1].projection)
+    points = np.random.default_rng(4).uniform(-0.5, 0.5, (5, 7, 3)) + np.array([0.0, 1.0, 0.0])
+    pixels = group.project(points)
+    assert pixels.shape == (3, 5, 7, 2)
+    np.testing.assert_array_equal(pixels[2], cameras[2].project(points))
+    np.testing.assert_array_equal(group.undistort(pixels), pixels)
+    with pytest.raises(ValueError, match=r"unique.*c0"):
+        CameraGroup([cameras[0], cameras[1], cameras[0]])
+    with pytest.raises(ValueError, match="at least one"):
+        CameraGroup([])
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        group.cameras = ()  # type: ignore[misc]
