@@ -218,8 +218,11 @@ class Reconstructor:
             self._history = [q, *self._history[:1]]
         poses = poses.reshape(-1, N_JOINTS, 3)
         if self.config.part_k and len(frames):
+            # Missing markers are filled with the main estimate, so every part is queried.
+            seen = markers[frames]
+            filled = np.where(np.isnan(seen), markers_of(poses[frames]), seen)
             poses[frames] = refine_with_parts(
-                self.source, markers[frames], poses[frames], self.config.part_k, self.config.eps
+                self.source, filled, poses[frames], self.config.part_k, self.config.eps
             )
         diff = markers_of(poses) - markers
         squared = np.where(
