@@ -40,3 +40,18 @@ def test_reconstruction_benchmark_prints_its_table(capsys: pytest.CaptureFixture
     assert "paper: 23.5 ms per frame" in out and "batch f/s" in out
     assert [r[0] for r in rows] == ["nn", "samba", "best"]
     assert all(float(r[2]) > 0 and float(r[6]) > 0 for r in rows)
+
+
+_spec_cam = importlib.util.spec_from_file_location(
+    "bench_cameras", ROOT / "bench" / "bench_cameras.py"
+)
+bench_cameras = importlib.util.module_from_spec(_spec_cam)
+_spec_cam.loader.exec_module(bench_cameras)
+
+
+def test_camera_benchmark_prints_its_tables(capsys: pytest.CaptureFixture[str]) -> None:
+    rows, fps = bench_cameras.bench(20, resolutions=((160, 120),), triangulation_frames=300)
+    out = capsys.readouterr().out
+    assert "baseline: fixed cv2.threshold" in out and "paper ms" in out
+    assert "8 markers x 4 cameras" in out and fps > 0
+    assert rows[0][:2] == ["160x120", "64"] and float(rows[0][2]) > 0
