@@ -31,10 +31,13 @@ sys.path.insert(0, str(ROOT))
 from samba.marker_detection import detect_markers  # noqa: E402
 from samba.marker_render import RenderOptions, render  # noqa: E402
 from samba.marker_tracking import MarkerTracker, TrackerSettings  # noqa: E402
-from samba.observation import evaluation_cameras  # noqa: E402
+from samba.observation import (  # noqa: E402
+    evaluation_cameras,
+    spread_cameras,
+)
 from samba.skeleton import markers_of  # noqa: E402
 from samba.synthetic import generate  # noqa: E402
-from samba.synthetic_cameras import spread_cameras, with_size  # noqa: E402
+from samba.synthetic_cameras import with_size  # noqa: E402
 from samba.triangulation import triangulate  # noqa: E402
 
 RESOLUTIONS = ((160, 120), (320, 240), (640, 480), (1280, 720), (1920, 1080))

@@ -26,8 +26,9 @@ sys.path.insert(0, str(ROOT))
 
 from ingest.bvh_take import BvhImportOptions, load_bvh_take  # noqa: E402
 from samba.camera_chain import ChainSettings, run_chain  # noqa: E402
+from samba.observation import spread_cameras  # noqa: E402
 from samba.synthetic import generate  # noqa: E402
-from samba.synthetic_cameras import spread_cameras, with_size  # noqa: E402
+from samba.synthetic_cameras import with_size  # noqa: E402
 
 CONFIGURATIONS = (
     ("2 cameras", 2, (160, 120), True),

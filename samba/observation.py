@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from samba.camera import Camera
 from samba.skeleton import BONES, JOINT_INDEX, N_JOINTS, N_MARKERS, markers_of
@@ -107,13 +108,28 @@ def evaluation_cameras(poses: np.ndarray) -> list[Camera]:
     smallest horizontal distance 3.5 + 0.25 k m (k = 0, 1, ...) from the aim point at
     which at least 99.5% of the marker views fall inside both images.
     """
-    poses = _check_poses(poses)
-    if len(poses) == 0:
-        raise ValueError("evaluation_cameras needs at least one pose")
+    return spread_cameras(poses, 2, IMAGE_SIZE)
+
+
+def spread_cameras(
+    poses: np.ndarray, count: int = 2, size: tuple[int, int] = IMAGE_SIZE
+) -> list[Camera]:
+    """`count` >= 2 cameras around a take's poses (n, 13, 3) meters, EVALUATION.md style.
+
+    All are at y = 1.5 m with a 60-degree lens, aimed at the mean marker position, at the
+    shortest horizontal distance 3.5 + 0.25 k m from it at which >= 99.5% of the marker
+    views fall inside all images. cam0 and cam1 stand 37.5 degrees either side of the
+    mean facing direction (exactly `evaluation_cameras` when `count` is 2 at 160x120);
+    the others spread over the back, 180 +- 37.5 degrees from the facing.
+    """
+    if count < 2:
+        raise ValueError(f"spread_cameras needs at least 2 cameras, got {count}")
+    poses = np.asarray(poses, dtype=np.float64)
+    half = SEPARATION_DEG / 2.0
+    back = [180.0] if count == 3 else list(np.linspace(180.0 - half, 180.0 + half, count - 2))
+    turns = Rotation.from_euler("y", np.array([half, -half, *back])[:, None], degrees=True)
+    directions = turns.apply(mean_facing(poses))
     aim = markers_of(poses).reshape(-1, 3).mean(axis=0)
-    facing = mean_facing(poses)
-    half = np.radians(SEPARATION_DEG / 2.0)
-    directions = [_turn_about_up(facing, angle) for angle in (half, -half)]
     distance = START_DISTANCE
     while distance <= MAX_DISTANCE:
         cameras = [
@@ -121,7 +137,7 @@ def evaluation_cameras(poses: np.ndarray) -> list[Camera]:
                 name=f"cam{i}",
                 position=np.array([aim[0], CAMERA_HEIGHT, aim[2]]) + distance * direction,
                 target=aim,
-                size=IMAGE_SIZE,
+                size=size,
                 hfov_deg=HFOV_DEG,
             )
             for i, direction in enumerate(directions)
@@ -129,9 +145,7 @@ def evaluation_cameras(poses: np.ndarray) -> list[Camera]:
         if marker_coverage(poses, cameras) >= MIN_COVERAGE:
             return cameras
         distance += DISTANCE_STEP
-    raise ValueError(
-        f"the take's markers do not fit the evaluation cameras within {MAX_DISTANCE} m"
-    )
+    raise ValueError(f"the take's markers do not fit {count} cameras within {MAX_DISTANCE} m")
 
 
 def observe_markers(
@@ -212,13 +226,6 @@ def _below(joint: int) -> list[int]:
         if parent in out:
             out.append(child)
     return out
-
-
-def _turn_about_up(direction: np.ndarray, angle: float) -> np.ndarray:
-    """`direction` (3,) turned by `angle` radians about +Y (right-handed)."""
-    c, s = np.cos(angle), np.sin(angle)
-    x, y, z = direction
-    return np.array([c * x + s * z, y, c * z - s * x])
 
 
 def _check_poses(poses: np.ndarray) -> np.ndarray:

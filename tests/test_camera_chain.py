@@ -10,10 +10,10 @@ import pytest
 from ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.camera_chain import ChainResult, run_chain
 from samba.lead_in import standing_lead_in
-from samba.observation import evaluation_cameras, marker_coverage
+from samba.observation import evaluation_cameras, marker_coverage, spread_cameras
 from samba.skeleton import markers_of
 from samba.synthetic import generate
-from samba.synthetic_cameras import spread_cameras, with_size
+from samba.synthetic_cameras import with_size
 
 RMS_LIMIT_M = 0.015
 """The issue's acceptance: 3D markers within 1.5 cm RMS where both cameras see them."""
