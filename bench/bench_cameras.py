@@ -27,6 +27,9 @@ from threadpoolctl import threadpool_limits
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from text_table import print_table  # noqa: E402
 
 from samba.marker_detection import detect_markers  # noqa: E402
 from samba.marker_render import RenderOptions, render  # noqa: E402
@@ -110,9 +113,7 @@ def bench(frames: int, resolutions=RESOLUTIONS, triangulation_frames: int = 10_0
     header = ["image", "paper ms", "p50 ms", "p99 ms", "baseline p50", "paper / p50", "target"]
     print(f"Detection + tracking per frame, one core, {len(poses) - 5} frames per resolution")
     print("baseline: fixed cv2.threshold + cv2.connectedComponentsWithStats on the same frames")
-    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
-    for row in [header, *rows]:
-        print("  ".join(str(c).rjust(w) for c, w in zip(row, widths, strict=True)))
+    print_table(None, header, rows)
     fps = time_triangulation(triangulation_frames)
     print(
         f"Triangulation, 8 markers x 4 cameras, batched DLT: {fps:,.0f} frames/s "

@@ -32,6 +32,9 @@ from scipy.spatial import cKDTree
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from text_table import print_table  # noqa: E402
 
 from db.index import APPROXIMATE_EPS, PoseIndex, marker_features  # noqa: E402
 from db.store import PoseStore  # noqa: E402
@@ -61,17 +64,6 @@ def rss_mb() -> float:
     with open("/proc/self/status") as fh:
         kb = int(re.search(r"VmRSS:\s+(\d+)", fh.read()).group(1))
     return kb / 1024
-
-
-def table(title: str, header: list[str], rows: list[list[object]]) -> None:
-    """Print a plain-text table."""
-    print(f"\n{title}")
-    cells = [header] + [[f"{c:.3g}" if isinstance(c, float) else str(c) for c in r] for r in rows]
-    widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
-    for j, r in enumerate(cells):
-        print("  " + "  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)))
-        if j == 0:
-            print("  " + "  ".join("-" * w for w in widths))
 
 
 def best_of(repeats: int, fn) -> float:
@@ -121,7 +113,7 @@ def bench_import(files: list[Path], repeats: int = 3) -> np.ndarray:
             base / full,
         ],
     ]
-    table(
+    print_table(
         f"Import: {len(files)} CMU files, {source_frames} source frames -> {len(poses)} poses"
         f" at 30 fps (one core, best of {repeats} runs)",
         ["stage", "seconds", "source frames/s", "poses/s", "speed vs baseline"],
@@ -176,7 +168,7 @@ def bench_index(real: np.ndarray, sizes: list[int], rng: np.random.Generator) ->
         rows += size_rows
         missing_rows.append(missing)
         print(f"  ... {n} poses done", flush=True)
-    table(
+    print_table(
         f"k={K} nearest poses, single queries (p50/p99 over 300) and a batch of 2000; "
         f"recall@{K} against brute force on 200 queries. Queries: 'novel' = real poses "
         "+ 8 deg per joint + 1 cm noise, 'covered' = + 2 deg + 5 mm",
@@ -193,7 +185,7 @@ def bench_index(real: np.ndarray, sizes: list[int], rng: np.random.Generator) ->
         ],
         rows,
     )
-    table(
+    print_table(
         "Novel queries with one marker missing (left wrist): the masked tree is built on first use",
         ["poses", "first query s", "p50 us", "p99 us", "batch q/s"],
         missing_rows,
@@ -262,7 +254,7 @@ def bench_store(real: np.ndarray, n: int, rng: np.random.Generator) -> None:
         loaded = time.perf_counter() - t0
         store.query(markers_of(real[:100].astype(np.float64)), K)
         after = rss_mb()
-    table(
+    print_table(
         f"Store of {n} poses",
         [
             "add + index s",

@@ -23,6 +23,9 @@ from threadpoolctl import threadpool_limits
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from text_table import print_table  # noqa: E402
 
 from db.index import PoseIndex  # noqa: E402
 from ingest.bvh_take import load_bvh_take  # noqa: E402
@@ -103,9 +106,7 @@ def bench(max_frames: int, methods: list[str]) -> list[list[object]]:
     header = ["method", "poses", "p50 ms", "p99 ms", "p50 / nn", "paper / p50", "batch f/s"]
     print(f"Reconstruction, one core, {len(markers)} frames; {label}")
     print(f"paper: {PAPER_MS} ms per frame (K = 10, N = 10)")
-    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
-    for row in [header, *rows]:
-        print("  ".join(str(c).rjust(w) for c, w in zip(row, widths, strict=True)))
+    print_table(None, header, rows)
     return rows
 
 

@@ -23,6 +23,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from text_table import print_table  # noqa: E402
 
 from ingest.bvh_take import BvhImportOptions, load_bvh_take  # noqa: E402
 from samba.camera_chain import ChainSettings, run_chain  # noqa: E402
@@ -83,9 +86,7 @@ def report(paths: list[Path], seconds: float | None) -> list[list[str]]:
               "seen by 2 %", "swaps", "phantoms"]  # fmt: skip
     source = "held-out CMU" if paths else "synthetic kick (no CMU data found)"
     print(f"Camera chain: render -> detect -> track -> DLT; {source}")
-    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
-    for row in [header, *rows]:
-        print("  ".join(str(c).rjust(w) for c, w in zip(row, widths, strict=True)))
+    print_table(None, header, rows)
     return rows
 
 
