@@ -19,6 +19,7 @@ from tqdm import tqdm
 from samba.calibration import MIN_VIEWS, WORLDS, CalibrationResult, calibrate
 from samba.calibration_board import BOARD_SPEC_HELP, Board, BoardView, parse_board
 from samba.calibration_file import write_calibration
+from samba.cli_arguments import natural, positive
 from samba.errors import InputError
 from samba.frame_source import FrameSource, open_frames
 
@@ -45,14 +46,14 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--floor-frame",
-        type=_natural,
+        type=natural,
         metavar="N",
         help="frame in which the board lies on the floor (default: the first frame in "
         "which any camera sees the board)",
     )
     parser.add_argument(
         "--every",
-        type=_positive,
+        type=positive,
         default=1,
         metavar="N",
         help="use every N-th frame only (frame numbers keep counting all frames)",
@@ -64,23 +65,6 @@ def register(parser: argparse.ArgumentParser) -> None:
         "adjustment (slower; helps when each camera saw the board in few images)",
     )
     parser.set_defaults(run=_run)
-
-
-def _positive(text: str) -> int:
-    value = _natural(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
-def _natural(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -25,6 +25,7 @@ from ingest.batch import expand_paths
 from ingest.bvh_take import load_bvh_take
 from samba import eval_report
 from samba.atomic_file import write_text_atomic
+from samba.cli_arguments import positive
 from samba.errors import InputError
 from samba.eval_report import SweepPoint
 from samba.evaluation import TakeErrors, capture_take, run_method, summarize
@@ -165,8 +166,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="NAME,...",
         help=f"methods to compare (default {','.join(METHODS)})",
     )
-    parser.add_argument("--K", type=_positive, help="neighbours K for every method but nn")
-    parser.add_argument("--N", type=_positive, help="pseudo-poses N for every method but nn")
+    parser.add_argument("--K", type=positive, help="neighbours K for every method but nn")
+    parser.add_argument("--N", type=positive, help="pseudo-poses N for every method but nn")
     parser.add_argument(
         "--dropout",
         type=_fraction,
@@ -199,25 +200,15 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--max-frames",
-        type=_positive,
+        type=positive,
         metavar="F",
         help="evaluate only the first F frames of each test take",
     )
     parser.set_defaults(run=_run)
 
 
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
 def _int_list(text: str) -> list[int]:
-    return [_positive(part) for part in text.split(",") if part.strip()]
+    return [positive(part) for part in text.split(",") if part.strip()]
 
 
 def _method_list(text: str) -> list[str]:
