@@ -12,7 +12,7 @@ Twist comes from the body lines and the limb planes:
   line (the chain bends between pelvis and shoulders).
 * Upper and lower limb share one bend axis: the normal of the limb plane (shoulder,
   elbow, wrist or hip, knee, ankle). Where the limb is nearly straight the plane is
-  undefined; the axis then blends smoothly (3° .. 15° of bend) into a reference axis
+  undefined; the axis then blends smoothly (2° .. 25° of bend) into a reference axis
   carried along with the torso by the shortest swing from a reference limb direction.
   That swing is singular only for an arm pointing up, back and across the body or a
   leg pointing straight up, so straight limbs do not flip.
@@ -59,7 +59,7 @@ _LIMBS: tuple[
     (11, 12, 13, 0, (0.0, -1.0, 0.1), (0.0, 0.0, -1.0)),
     (14, 15, 16, 0, (0.0, -1.0, 0.1), (0.0, 0.0, -1.0)),
 )
-_STRAIGHT = (np.sin(np.radians(3.0)), np.sin(np.radians(15.0)))
+_STRAIGHT = (np.sin(np.radians(2.0)), np.sin(np.radians(25.0)))
 """Bend (as sine of the angle) below which a limb counts as straight, above which its
 plane alone gives the bend axis."""
 _LEVEL_FOOT = (0.5, 0.8)
