@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from export.humanoid import N_BONES, PARENTS, TIP_BONES, HumanoidRig
+from samba.kinematics import resample_times, sample_linear, sample_rotations
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,15 @@ class HumanoidMotion:
     def frames(self, start: int, stop: int) -> HumanoidMotion:
         """Frames `start` .. `stop - 1` as a new motion."""
         return HumanoidMotion(self.rig, self.rotations[start:stop], self.root[start:stop], self.fps)
+
+    def resampled(self, fps: float) -> HumanoidMotion:
+        """The motion at another frame rate over the same time span: rotations
+        interpolated on the shorter arc, the root linearly."""
+        if not 0 < fps < float("inf"):
+            raise ValueError(f"--fps must be positive and finite, got {fps}")
+        times = resample_times(len(self), self.fps, fps)
+        rotations = sample_rotations(self.rotations, times)
+        return HumanoidMotion(self.rig, rotations, sample_linear(self.root, times), fps)
 
     def world_matrices(self) -> np.ndarray:
         """World rotation matrices (n, 17, 3, 3) of every bone (rest pose = identity)."""

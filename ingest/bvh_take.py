@@ -36,8 +36,8 @@ _MAX_REACH = 1e9
 class BvhImportOptions:
     """How to turn a BVH file into a take.
 
-    `fps`: the output rate (frames per second). `skip_frames`: leading source frames to
-    drop. `skip_tpose`: drop leading T-pose frames found by
+    `fps`: the output rate (frames per second), None for the file's own.
+    `skip_frames`: leading source frames to drop. `skip_tpose`: drop leading T-pose frames found by
     `ingest.normalize.leading_tpose_frames` (otherwise they are kept with a warning).
     `units`: 'auto' or a key of `ingest.normalize.UNITS`. `up`:
     'auto' or a signed axis such as '+z'. `handedness`: 'auto' (mirror data whose knees
@@ -46,7 +46,7 @@ class BvhImportOptions:
     style names such as 131_01).
     """
 
-    fps: float = 30.0
+    fps: float | None = 30.0
     skip_frames: int = 0
     skip_tpose: bool = False
     units: str = "auto"
@@ -57,7 +57,7 @@ class BvhImportOptions:
     action: str = ""
 
     def __post_init__(self) -> None:
-        if not 0 < self.fps < float("inf"):
+        if self.fps is not None and not 0 < self.fps < float("inf"):
             raise ValueError(f"--fps must be positive and finite, got {self.fps}")
         if self.skip_frames < 0:
             raise ValueError(f"--skip-frames must be >= 0, got {self.skip_frames}")
@@ -90,7 +90,8 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
             source, f"--skip-frames {options.skip_frames} drops all {bvh.n_frames} frames"
         )
     subset = bvh.ancestry(joints)
-    times = resample_times(bvh.n_frames - options.skip_frames, bvh.fps, options.fps)
+    fps = options.fps or bvh.fps
+    times = resample_times(bvh.n_frames - options.skip_frames, bvh.fps, fps)
     lo = np.floor(times + 1e-9).astype(np.int64)
     frac = np.clip(times - lo, 0.0, 1.0)
     last = bvh.n_frames - 1 - options.skip_frames
@@ -133,10 +134,10 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
         positions, first = positions[tpose:], tpose
     elif tpose:
         warnings.append(f"starts with {tpose} T-pose frame(s); --skip-tpose drops them")
-    positions, tilt = level_floor(positions, options.fps)
+    positions, tilt = level_floor(positions, fps)
     if tilt > 1.0:
         warnings.append(f"capture floor tilted {tilt:.1f} degrees: levelled")
-    positions[..., 1] -= floor_height(positions, options.fps)
+    positions[..., 1] -= floor_height(positions, fps)
     leg = leg_length(positions)
     if not 0.4 <= leg <= 1.2:
         warnings.append(f"leg length {leg:.2f} m is implausible: check --units (read as {units})")
@@ -148,7 +149,7 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
     return Take(
         name=path.stem,
         poses=positions,
-        fps=options.fps,
+        fps=fps,
         source=str(path.resolve()),
         content_hash=hashlib.sha256(data).hexdigest(),
         rig=rig.name,

@@ -20,6 +20,7 @@ AREAS: dict[str, tuple[str, str]] = {
     "db": ("ingest.cli", "pose database: init, import, ls, show, label, rm, verify, stats, query"),
     "eval": ("samba.eval_cli", "accuracy and speed of every reconstruction method on BVH takes"),
     "calibrate": ("samba.calibrate_cli", "calibrate cameras from images or videos of a board"),
+    "export": ("export.cli", "retarget takes to a humanoid avatar and write USD, glTF or BVH"),
     "demo": ("db.demo", "build a database from built-in synthetic motions and query it"),
 }
 """Subcommand -> (module with `register(parser)`, one-line help)."""

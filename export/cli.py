@@ -1,0 +1,192 @@
+"""`samba export`: takes (BVH files or pose-store takes) to USD, glTF binary or BVH."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from export.avatar_mesh import AvatarMesh
+from export.errors import ExportError
+from export.humanoid import HumanoidRig
+from export.motion import HumanoidMotion
+from export.retarget import retarget
+from export.take_source import load_take
+from samba.cli_arguments import positive_float
+from samba.errors import SambaError
+
+FORMAT_SUFFIXES: dict[str, tuple[str, ...]] = {
+    "usd": (".usda", ".usdc", ".usd"),
+    "glb": (".glb",),
+    "bvh": (".bvh",),
+}
+"""Format -> accepted output suffixes; the first is used for files named in a folder."""
+
+
+@dataclass(frozen=True)
+class Avatar:
+    """What the takes are put on: the rig and, for USD and glTF, its skinned mesh."""
+
+    rig: HumanoidRig
+    mesh: AvatarMesh
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    """Add the `export` arguments to `parser`."""
+    parser.add_argument(
+        "takes",
+        nargs="+",
+        metavar="TAKE",
+        help="BVH files, or take names / ids of the pose store given with --db",
+    )
+    parser.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="OUT",
+        help="output file (one take) or folder (several takes)",
+    )
+    parser.add_argument(
+        "--format",
+        choices=sorted(FORMAT_SUFFIXES),
+        help="usd, glb or bvh (default: from the suffix of OUT)",
+    )
+    parser.add_argument("--db", metavar="STORE", help="pose store the TAKE names refer to")
+    parser.add_argument(
+        "--avatar",
+        metavar="FILE",
+        help="a glTF / VRM humanoid avatar whose skeleton the takes are put on",
+    )
+    parser.add_argument(
+        "--fps",
+        type=positive_float,
+        metavar="N",
+        help="output frame rate (default: the take's own)",
+    )
+    parser.add_argument(
+        "--range",
+        metavar="A:B",
+        dest="frame_range",
+        help="export only frames A..B-1 of each take (either end may be left out)",
+    )
+    parser.add_argument(
+        "--unit",
+        choices=["m", "cm"],
+        default="m",
+        help="BVH length unit (default m; many tools assume cm)",
+    )
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Export every take; returns 1 if any failed (the others are still written)."""
+    fmt = args.format or format_of(Path(args.output))
+    frames = parse_range(args.frame_range)
+    targets = output_paths(args.takes, Path(args.output), fmt)
+    avatar = load_avatar(args.avatar)
+    failed = 0
+    bar = tqdm(targets, unit="take", disable=len(targets) == 1 or not sys.stderr.isatty())
+    for ref, out in bar:
+        try:
+            take = load_take(ref, args.db)
+            poses = take.poses[frames]
+            if len(poses) == 0:
+                raise ExportError(
+                    "--range", f"{args.frame_range} selects no frames of {ref} ({len(take)} frames)"
+                )
+            motion = retarget(poses, avatar.rig, take.fps)
+            if args.fps:
+                motion = motion.resampled(args.fps)
+            write(fmt, out, motion, avatar.mesh, args.unit)
+        except SambaError as exc:
+            failed += 1
+            if len(targets) == 1:
+                raise
+            tqdm.write(f"samba: error: {exc}", file=sys.stderr)
+            continue
+        tqdm.write(
+            f"{ref} -> {out}: {len(motion)} frames at {motion.fps:g} fps ({motion.duration:.1f} s)"
+        )
+    if failed:
+        print(f"samba: {failed} of {len(targets)} takes failed", file=sys.stderr)
+    return 1 if failed else 0
+
+
+def format_of(path: Path) -> str:
+    """The export format an output file's suffix implies; `ExportError` if none does."""
+    for fmt, suffixes in FORMAT_SUFFIXES.items():
+        if path.suffix.lower() in suffixes:
+            return fmt
+    raise ExportError(
+        str(path),
+        "cannot tell the format from the suffix: give --format "
+        "usd|glb|bvh or name the file .usda, .usdc, .usd, .glb or .bvh",
+    )
+
+
+def parse_range(text: str | None) -> slice:
+    """`A:B` (either end optional, frames counted from 0) as a slice; `ExportError` naming
+    --range when malformed."""
+    if text is None:
+        return slice(None)
+    parts = text.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        start, stop = (int(p) if p.strip() else None for p in parts)
+    except ValueError:
+        raise ExportError(
+            "--range", f"expected A:B with whole frame numbers, got {text!r}"
+        ) from None
+    if (start is not None and start < 0) or (stop is not None and stop < 0):
+        raise ExportError("--range", f"frame numbers must be >= 0, got {text!r}")
+    return slice(start, stop)
+
+
+def output_paths(takes: list[str], output: Path, fmt: str) -> list[tuple[str, Path]]:
+    """Each take with the file it goes to: OUT itself for one take (unless OUT is an
+    existing folder), else OUT/<take name><suffix> (the folder is created)."""
+    suffix = FORMAT_SUFFIXES[fmt][0]
+    if len(takes) == 1 and not output.is_dir():
+        if output.suffix.lower() not in FORMAT_SUFFIXES[fmt]:
+            raise ExportError(
+                str(output), f"a {fmt} file must end in {' or '.join(FORMAT_SUFFIXES[fmt])}"
+            )
+        return [(takes[0], output)]
+    if output.exists() and not output.is_dir():
+        raise ExportError(str(output), "several takes need an output folder, this is a file")
+    output.mkdir(parents=True, exist_ok=True)
+    paths = [(ref, output / f"{Path(ref).stem}{suffix}") for ref in takes]
+    names = [p for _, p in paths]
+    if len(set(names)) != len(names):
+        raise ExportError(str(output), "two takes would be written to the same file name")
+    return paths
+
+
+def load_avatar(path: str | None) -> Avatar:
+    """The avatar of `--avatar FILE`, or the default mannequin; a generated, skinned
+    mannequin body in both cases."""
+    from export.mannequin import mannequin
+
+    if path is None:
+        rig = HumanoidRig.from_body()
+    else:
+        from export.avatar_file import read_avatar_rig
+
+        rig = read_avatar_rig(path)
+    return Avatar(rig=rig, mesh=mannequin(rig))
+
+
+def write(fmt: str, path: Path, motion: HumanoidMotion, mesh: AvatarMesh, unit: str) -> None:
+    """Write `motion` to `path` in `fmt` (USD and glTF with the skinned `mesh`, BVH in
+    `unit`)."""
+    if fmt == "bvh":
+        importlib.import_module("export.bvh_writer").write_bvh(path, motion, unit=unit)
+    elif fmt == "glb":
+        importlib.import_module("export.gltf_writer").write_glb(path, motion, mesh)
+    else:
+        importlib.import_module("export.usd_writer").write_usd(path, motion, mesh)

@@ -1,0 +1,42 @@
+"""Where an export's take comes from: a BVH file, or a take of a pose store."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from db.store import PoseStore
+from export.errors import ExportError
+from ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.skeleton import N_JOINTS
+from samba.take import Take
+
+
+def load_take(ref: str, store: str | None = None) -> Take:
+    """The take named by `ref`: a take name or id of the pose store at `store`, or
+    without a store a BVH file path (read at its own frame rate, any supported rig).
+
+    Store takes whose near-duplicate poses were dropped on import get the missing
+    frames back by linear interpolation, so the take plays at its recorded speed.
+    Raises an `InputError` subclass naming `ref` when it cannot be found or read.
+    """
+    if store is not None:
+        return _store_take(PoseStore.open(store), ref)
+    path = Path(ref)
+    if path.suffix.lower() != ".bvh":
+        raise ExportError(ref, "not a .bvh file; to export a take of a pose store, give --db STORE")
+    return load_bvh_take(path, BvhImportOptions(fps=None))
+
+
+def _store_take(store: PoseStore, ref: str) -> Take:
+    info = store.take(ref)
+    rows = slice(info.first_row, info.first_row + info.frame_count)
+    poses = np.asarray(store.poses[rows], dtype=np.float64)
+    frames = np.asarray(store.frames[rows], dtype=np.int64)
+    full = np.arange(frames[0], frames[-1] + 1)
+    if len(full) != len(frames):
+        flat = poses.reshape(len(poses), -1)
+        poses = np.stack([np.interp(full, frames, c) for c in flat.T], axis=1)
+        poses = poses.reshape(len(full), N_JOINTS, 3)
+    return Take(name=info.name, poses=poses, fps=info.fps, source=info.source, rig=info.rig)
