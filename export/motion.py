@@ -20,8 +20,8 @@ from samba.kinematics import resample_times, sample_linear, sample_rotations
 
 @dataclass(frozen=True)
 class HumanoidMotion:
-    """`rotations` (n, 17, 4) local quaternions (x, y, z, w) and `root` (n, 3) Hips
-    positions in meters, sampled at `fps` frames per second, for `rig`."""
+    """`rotations` (n, 17, 4) local quaternions (x, y, z, w; normalised on creation) and
+    `root` (n, 3) Hips positions in meters, sampled at `fps` frames per second, for `rig`."""
 
     rig: HumanoidRig
     rotations: np.ndarray
@@ -41,7 +41,10 @@ class HumanoidMotion:
             raise ValueError("motion has no frames")
         if not self.fps > 0:
             raise ValueError(f"motion fps must be positive, got {self.fps}")
-        object.__setattr__(self, "rotations", continuous_quaternions(rotations))
+        norms = np.linalg.norm(rotations, axis=-1, keepdims=True)
+        if not (np.isfinite(root).all() and np.isfinite(norms).all() and (norms > 0).all()):
+            raise ValueError("motion has non-finite root positions or non-finite / zero rotations")
+        object.__setattr__(self, "rotations", continuous_quaternions(rotations / norms))
         object.__setattr__(self, "root", root)
 
     def __len__(self) -> int:
