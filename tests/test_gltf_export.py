@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pygltflib as gltf
 import pytest
+from glb_edit import with_json
 
 from export.avatar_mesh import AvatarMesh
 from export.errors import ExportError
@@ -357,32 +358,20 @@ def test_invalid_motion_is_refused_and_a_mesh_without_triangles_not_written(
     assert not any(tmp_path.iterdir())
 
 
-def _with_json(glb: bytes, edit: Callable[[dict[str, Any]], None]) -> bytes:
-    """A .glb whose JSON chunk is `edit`ed (the binary chunk kept)."""
-    size = struct.unpack_from("<I", glb, 12)[0]
-    doc = json.loads(glb[20 : 20 + size])
-    edit(doc)
-    text = json.dumps(doc).encode()
-    text += b" " * (-len(text) % 4)
-    rest = glb[20 + size :]
-    head = struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest))
-    return head + struct.pack("<I4s", len(text), b"JSON") + text + rest
-
-
 CORRUPTIONS: dict[str, Callable[[bytes], bytes]] = {
     "text file": lambda glb: b"Hips 0 0 0\n" * 10,
     "empty file": lambda glb: b"",
     "truncated": lambda glb: glb[: len(glb) // 2],
     "version 1": lambda glb: glb[:4] + struct.pack("<I", 1) + glb[8:],
     "garbled JSON": lambda glb: glb[:20] + b"{]" + glb[22:],
-    "accessor out of range": lambda glb: _with_json(
+    "accessor out of range": lambda glb: with_json(
         glb, lambda doc: doc["animations"][0]["samplers"][0].update(output=999)
     ),
-    "view past the data": lambda glb: _with_json(
+    "view past the data": lambda glb: with_json(
         glb, lambda doc: doc["bufferViews"][-1].update(byteOffset=10**9)
     ),
-    "node cycle": lambda glb: _with_json(glb, lambda doc: doc["nodes"][5].update(children=[0])),
-    "two parents": lambda glb: _with_json(glb, lambda doc: doc["nodes"][5].update(children=[1])),
+    "node cycle": lambda glb: with_json(glb, lambda doc: doc["nodes"][5].update(children=[0])),
+    "two parents": lambda glb: with_json(glb, lambda doc: doc["nodes"][5].update(children=[1])),
 }
 
 
