@@ -24,7 +24,8 @@ def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:
 def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """A temporary path beside `path`, with the same suffix, for a writer that needs a
     file name (USD, for one); on normal exit it replaces `path` with `os.replace`, on
-    any exception it is removed and `path` is left as it was."""
+    any exception it is removed and `path` is left as it was. The file gets the mode
+    a plainly created file would (0666 less the umask), not the temporary file's 0600."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(
         dir=path.resolve().parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}"
@@ -32,8 +33,21 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     os.close(fd)
     try:
         yield Path(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
     except BaseException:
         with suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def _umask() -> int:
+    """The process umask, read without changing it where Linux shows it (threads may be
+    creating files meanwhile)."""
+    with suppress(OSError, ValueError), open("/proc/self/status", encoding="ascii") as status:
+        for line in status:
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask

@@ -10,6 +10,7 @@ from pathlib import Path
 import bvhio
 import numpy as np
 import pytest
+from export_fixtures import real_takes, synthetic_motion
 from scipy.spatial.transform import Rotation
 
 from export.bvh_writer import UNITS, euler_zxy, write_bvh
@@ -19,27 +20,20 @@ from export.motion import HumanoidMotion
 from export.retarget import bone_direction_errors, retarget
 from ingest.bvh import read_bvh
 from ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba import synthetic
 from samba.take import Take
 
-RIG_FAMILIES = ("cgspeed", "daz", "iclone")
-"""Prefixes of the shared CMU files; the tests export the first file of each."""
 SYNTHETIC = ("walk", "kick", "turn", "jumping_jacks")
 UNIT = pytest.mark.parametrize("unit", list(UNITS))
 BONE_OF_JOINT = [next(b for b, j in CAPTURE_JOINT.items() if j == i) for i in range(13)]
 """The humanoid bone at each of the 13 capture joints."""
 
 
-def synthetic_motion(motion: str = "walk", seconds: float = 4.0) -> tuple[Take, HumanoidMotion]:
-    """A synthetic take and its retargeting onto the default rig."""
-    take = synthetic.generate(motion, seconds=seconds, seed=5)
-    return take, retarget(take.poses, HumanoidRig.from_body(), take.fps)
-
-
 def real_motions(cmu_dir: Path) -> list[tuple[Take, HumanoidMotion]]:
-    """The first take of each of the `RIG_FAMILIES` in the shared CMU data, retargeted."""
-    takes = [load_bvh_take(min(cmu_dir.glob(f"{family}_*.bvh"))) for family in RIG_FAMILIES]
-    return [(take, retarget(take.poses, HumanoidRig.from_body(), take.fps)) for take in takes]
+    """The first take of each rig family in the shared CMU data, retargeted."""
+    return [
+        (take, retarget(take.poses, HumanoidRig.from_body(), take.fps))
+        for take in real_takes(cmu_dir)
+    ]
 
 
 def read_back(path: Path, unit: str) -> tuple[np.ndarray, np.ndarray]:
@@ -96,7 +90,7 @@ def assert_imports_as_take(path: Path, unit: str, motion: HumanoidMotion) -> Non
 @UNIT
 @pytest.mark.parametrize("name", SYNTHETIC)
 def test_synthetic_takes_round_trip(tmp_path: Path, name: str, unit: str) -> None:
-    take, motion = synthetic_motion(name)
+    take, motion = synthetic_motion(name, seed=5)
     path = tmp_path / f"{name}.bvh"
     write_bvh(path, motion, unit)
     assert_round_trip(path, unit, take, motion)
@@ -115,7 +109,7 @@ def test_real_takes_round_trip(tmp_path: Path, cmu_dir: Path, unit: str) -> None
 
 
 def test_file_layout(tmp_path: Path) -> None:
-    _, motion = synthetic_motion(seconds=0.5)
+    _, motion = synthetic_motion(seed=5, seconds=0.5)
     path = tmp_path / "walk.bvh"
     write_bvh(path, motion, "cm")
     text = path.read_text()
@@ -146,7 +140,7 @@ def test_file_layout(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("fps", [24.0, 29.97, 30.0, 60.0, 120.0])
 def test_frame_time_keeps_the_frame_rate(tmp_path: Path, fps: float) -> None:
-    _, motion = synthetic_motion(seconds=0.2)
+    _, motion = synthetic_motion(seed=5, seconds=0.2)
     path = tmp_path / "take.bvh"
     write_bvh(path, HumanoidMotion(motion.rig, motion.rotations, motion.root, fps), "m")
     assert read_bvh(path).fps == pytest.approx(fps, rel=1e-6)
@@ -169,7 +163,7 @@ def test_euler_angles_are_exact_and_continuous_through_gimbal_lock() -> None:
 
 
 def test_exported_angles_rebuild_the_local_rotations() -> None:
-    _, motion = synthetic_motion("jumping_jacks")
+    _, motion = synthetic_motion("jumping_jacks", seed=5)
     angles = euler_zxy(motion.rotations)
     rebuilt = Rotation.from_euler("ZXY", angles.reshape(-1, 3), degrees=True)
     local = Rotation.from_quat(motion.rotations.reshape(-1, 4))
@@ -178,7 +172,7 @@ def test_exported_angles_rebuild_the_local_rotations() -> None:
 
 
 def test_bad_unit_is_refused_before_writing(tmp_path: Path) -> None:
-    _, motion = synthetic_motion(seconds=0.1)
+    _, motion = synthetic_motion(seed=5, seconds=0.1)
     path = tmp_path / "take.bvh"
     path.write_text("the previous export")
     with pytest.raises(ValueError, match="--unit must be one of m, cm, got 'mm'"):
@@ -189,7 +183,7 @@ def test_bad_unit_is_refused_before_writing(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("kind", ["missing folder", "directory", "permission denied"])
 def test_unwritable_path_raises_and_leaves_no_file(tmp_path: Path, kind: str) -> None:
-    _, motion = synthetic_motion(seconds=0.1)
+    _, motion = synthetic_motion(seed=5, seconds=0.1)
     folder = tmp_path / "out"
     if kind == "missing folder":
         path = folder / "take.bvh"
@@ -211,7 +205,7 @@ def test_unwritable_path_raises_and_leaves_no_file(tmp_path: Path, kind: str) ->
 def test_failure_midway_leaves_existing_file_untouched(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    _, motion = synthetic_motion(seconds=0.1)
+    _, motion = synthetic_motion(seed=5, seconds=0.1)
     path = tmp_path / "take.bvh"
     path.write_text("the previous export")
     real_write = Path.write_bytes
