@@ -207,9 +207,7 @@ def solve_lm(
             [sqrt_prior * w, sqrt_alpha * (q - x)[mask], sqrt_beta * (q - target)]
         )
 
-    jacobian = np.concatenate(
-        [np.diag(sqrt_prior), sqrt_alpha * u[mask], sqrt_beta[:, None] * u]
-    )
+    jacobian = np.concatenate([np.diag(sqrt_prior), sqrt_alpha * u[mask], sqrt_beta[:, None] * u])
     result = least_squares(
         residuals,
         w0[kept],
