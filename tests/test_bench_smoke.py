@@ -55,3 +55,20 @@ def test_camera_benchmark_prints_its_tables(capsys: pytest.CaptureFixture[str]) 
     assert "baseline: fixed cv2.threshold" in out and "paper ms" in out
     assert "8 markers x 4 cameras" in out and fps > 0
     assert rows[0][:2] == ["160x120", "64"] and float(rows[0][2]) > 0
+
+
+_spec_export = importlib.util.spec_from_file_location(
+    "bench_export", ROOT / "bench" / "bench_export.py"
+)
+bench_export = importlib.util.module_from_spec(_spec_export)
+_spec_export.loader.exec_module(bench_export)
+
+
+def test_export_benchmark_prints_speed_and_round_trip_tables(
+    cmu_files: list[Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    bench_export.bench_speed(300, repeats=1)
+    bench_export.bench_roundtrip(cmu_files[:2])
+    out = capsys.readouterr().out
+    assert "baseline: np.savetxt" in out and "write .usdc" in out and "retarget" in out
+    assert "Round trip of 2 BVH files" in out and "worst" in out
