@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from export.usd_reader import read_usd_joint_positions
 
 from db.store import PoseStore
 from export.bvh_writer import write_bvh
@@ -15,6 +14,7 @@ from export.gltf_writer import write_glb
 from export.humanoid import BONE_NAMES, HumanoidRig
 from export.motion import HumanoidMotion
 from export.retarget import bone_direction_errors, retarget
+from export.usd_reader import read_usd_joint_positions
 from ingest.bvh import read_bvh
 from samba.cli import main
 from samba.skeleton import Body
