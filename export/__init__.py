@@ -1,4 +1,2 @@
-"""Retargeting of the 13-joint skeleton to humanoid avatars and USD / glTF / BVH writers.
-
-Empty until the export issue lands; present so that the package layout is fixed.
-"""
+"""Retargeting of the 13-joint skeleton to humanoid avatars, the default avatar, and the
+USD / glTF / BVH writers (`samba export`)."""
