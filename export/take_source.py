@@ -1,4 +1,4 @@
-"""Where an export's take comes from: a BVH file, or a take of a pose store."""
+"""Where an export's take comes from: a BVH file, a recorded .mcap take, or a pose store take."""
 
 from __future__ import annotations
 
@@ -9,13 +9,15 @@ import numpy as np
 from db.store import PoseStore
 from export.errors import ExportError
 from ingest.bvh_take import BvhImportOptions, load_bvh_take
+from ingest.mcap_take import read_take
 from samba.skeleton import N_JOINTS
 from samba.take import Take
 
 
 def load_take(ref: str, store: str | None = None) -> Take:
     """The take named by `ref`: a take name or id of the pose store at `store`, or
-    without a store a BVH file path (read at its own frame rate, any supported rig).
+    without a store a BVH file path (read at its own frame rate, any supported rig) or an
+    MCAP take recorded by the live service (`ingest.mcap_take.read_take`).
 
     Store takes whose near-duplicate poses were dropped on import get the missing
     frames back by linear interpolation, so the take plays at its recorded speed.
@@ -24,8 +26,12 @@ def load_take(ref: str, store: str | None = None) -> Take:
     if store is not None:
         return _store_take(PoseStore.open(store), ref)
     path = Path(ref)
+    if path.suffix.lower() == ".mcap":
+        return read_take(path)
     if path.suffix.lower() != ".bvh":
-        raise ExportError(ref, "not a .bvh file; to export a take of a pose store, give --db STORE")
+        raise ExportError(
+            ref, "not a .bvh file or .mcap take; to export a take of a pose store, give --db STORE"
+        )
     return load_bvh_take(path, BvhImportOptions(fps=None))
 
 

@@ -10,9 +10,12 @@ from tqdm import tqdm
 
 from db.store import PoseStore
 from ingest.bvh_take import BvhImportOptions, load_bvh_take
+from ingest.mcap_take import read_take
 from samba.errors import SambaError
+from samba.take import Take
 
-SUFFIXES = (".bvh",)
+SUFFIXES = (".bvh", ".mcap")
+"""Files picked up in named folders: BVH and takes recorded by the live service."""
 
 
 @dataclass
@@ -68,7 +71,7 @@ def import_paths(
     for path in bar:
         bar.set_postfix_str(path.name, refresh=False)
         try:
-            take = load_bvh_take(path, options)
+            take = _load_take(path, options)
             added = store.add(take, mirror=mirror, min_change=min_change, build_index=False)
         except SambaError as exc:
             results.append(FileResult(str(path), "failed", error=str(exc)))
@@ -89,3 +92,14 @@ def import_paths(
     if any(r.status == "added" for r in results):
         store.build_index()
     return results
+
+
+def _load_take(path: Path, options: BvhImportOptions | None) -> Take:
+    """A BVH file read with `options`, or a take the live service recorded (.mcap), which
+    keeps its own frame rate and gets only the subject / action labels of `options`."""
+    if path.suffix.lower() != ".mcap":
+        return load_bvh_take(path, options)
+    take = read_take(path)
+    if options is not None:
+        take.subject, take.action = options.subject, options.action
+    return take

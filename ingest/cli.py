@@ -30,9 +30,13 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     p.set_defaults(run=_init)
 
-    p = sub.add_parser("import", help="import BVH files or folders of them")
+    p = sub.add_parser("import", help="import BVH files or folders of them, or .mcap takes")
     p.add_argument("store", help="pose store directory")
-    p.add_argument("paths", nargs="+", help="BVH files and/or folders (searched recursively)")
+    p.add_argument(
+        "paths",
+        nargs="+",
+        help="BVH files, recorded .mcap takes, and/or folders (searched recursively for both)",
+    )
     p.add_argument("--mirror", action="store_true", help="also store left/right mirror images")
     p.add_argument(
         "--min-change",

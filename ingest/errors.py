@@ -9,3 +9,7 @@ class BvhError(InputError):
 
 class RigError(InputError):
     """A skeleton cannot be mapped to the 13 joints, or a mapping file is invalid."""
+
+
+class TakeFileError(InputError):
+    """A recorded take (.mcap) cannot be read: the message names the file and the problem."""

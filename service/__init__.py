@@ -1,4 +1,5 @@
 """The live capture service: camera packets in, poses out (VMC/OSC, viewer, MCAP takes).
 
-Empty until the live-service issue lands; present so that the package layout is fixed.
+`packet` is the camera-node wire format, `vmc` the VMC/OSC output to game engines,
+`take_recorder` the MCAP take writer (read back by `ingest.mcap_take`).
 """

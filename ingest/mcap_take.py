@@ -1,0 +1,119 @@
+"""`read_take`: a take recorded by the live service (`service.take_recorder.TakeRecorder`)
+back as a `Take`, even from a killed recorder.
+
+The file is read as a stream of records, not through its summary, so a file without a
+footer (the recorder died before `close`) yields every frame of its complete chunks.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+from mcap.records import Channel, McapRecord, Message, Metadata
+from mcap.stream_reader import StreamReader
+
+from ingest.errors import TakeFileError
+from samba.skeleton import N_JOINTS
+from samba.take import Take
+
+POSE_TOPIC = "/pose_raw"
+"""Topic of the reconstructed poses (`samba.PoseRaw` JSON: `joints` 13 x [x, y, z] meters)."""
+TAKE_METADATA = "take"
+"""Name of the metadata record holding `name`, `fps` and `start_time` (ISO 8601, UTC)."""
+
+
+def read_take(path: str | Path) -> Take:
+    """The take recorded in the MCAP file `path`: poses (n, 13, 3) float32 meters from
+    `/pose_raw`, fps and name from the `take` metadata, rig "live".
+
+    A file cut short (no footer) gives the frames before the cut, with a warning in
+    `Take.warnings` saying so and how many frames were recovered. Raises `TakeFileError`
+    naming the file when it cannot be read, is not MCAP, or holds no recorded frame.
+    """
+    path = Path(path)
+    source = str(path)
+    try:
+        stream = path.open("rb")
+    except OSError as exc:
+        raise TakeFileError(source, f"cannot read file: {exc.strerror or exc}") from exc
+    meta: dict[str, str] | None = None
+    pose_channels: set[int] = set()
+    poses: list[np.ndarray] = []
+    with stream:
+        records = _RecordStream(stream, path.stat().st_size)
+        for record in records:
+            if isinstance(record, Metadata) and record.name == TAKE_METADATA:
+                meta = dict(record.metadata)
+            elif isinstance(record, Channel) and record.topic == POSE_TOPIC:
+                pose_channels.add(record.id)
+            elif isinstance(record, Message) and record.channel_id in pose_channels:
+                poses.append(_pose(record, source, len(poses)))
+    cut = records.error
+    if records.count == 0:
+        raise TakeFileError(source, f"not an MCAP file ({cut})")
+    if meta is None:
+        raise TakeFileError(source, "no take metadata: not a take recorded by samba")
+    if not poses:
+        raise TakeFileError(
+            source, "holds no recorded frame" + (f" (cut short: {cut})" if cut else "")
+        )
+    try:
+        fps = float(meta.get("fps", ""))
+    except ValueError:
+        fps = 0.0
+    if not 0 < fps < float("inf"):
+        raise TakeFileError(source, f"take metadata has no valid fps: {meta.get('fps')!r}")
+    warnings = []
+    if cut is not None:
+        warnings.append(
+            f"file cut short (no MCAP footer; the recorder was killed?): recovered {len(poses)} "
+            f"frames up to the last complete chunk ({cut})"
+        )
+    return Take(
+        name=meta.get("name") or path.stem,
+        poses=np.stack(poses),
+        fps=fps,
+        source=str(path.resolve()),
+        rig="live",
+        warnings=warnings,
+        meta={"start_time": meta.get("start_time", ""), "format": "mcap"},
+    )
+
+
+class _RecordStream:
+    """Iterates the records of an MCAP file of `size` bytes until its end or the first
+    undecodable byte. Afterwards `count` is the number of records read and `error`
+    describes what stopped the stream early (None after a complete file)."""
+
+    def __init__(self, stream: BinaryIO, size: int) -> None:
+        reader = StreamReader(stream, validate_crcs=True, record_size_limit=size)
+        self._records = iter(reader.records)
+        self.count = 0
+        self.error: str | None = None
+
+    def __iter__(self) -> Iterator[McapRecord]:
+        while True:
+            try:
+                record = next(self._records)
+            except StopIteration:
+                return
+            except Exception as exc:  # mcap, struct, zstandard and lz4 each raise their own
+                self.error = f"{type(exc).__name__}: {exc}".removesuffix(": ")
+                return
+            self.count += 1
+            yield record
+
+
+def _pose(message: Message, source: str, index: int) -> np.ndarray:
+    """The (13, 3) joints of a `/pose_raw` message, float32 meters."""
+    try:
+        joints = np.array(json.loads(message.data)["joints"], dtype=np.float32)
+    except (ValueError, KeyError, TypeError) as exc:
+        raise TakeFileError(source, f"/pose_raw message {index} is malformed: {exc}") from exc
+    if joints.shape != (N_JOINTS, 3) or not np.isfinite(joints).all():
+        raise TakeFileError(source, f"/pose_raw message {index}: joints are not finite (13, 3)")
+    return joints

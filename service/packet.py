@@ -1,0 +1,221 @@
+"""The camera-node → server wire format: one UDP datagram per camera frame.
+
+A camera node sends, for each frame, the 8 labelled marker positions its tracker found
+(`samba.marker_tracking`) as one `MarkerPacket`. `encode` and `decode` turn it into bytes
+and back; `decode` raises `PacketError` (and nothing else) on any datagram it drops,
+with a `reason` from a small fixed set the server counts drops by.
+
+Layout (version 1, little-endian, no padding; 100 bytes, 116 with the tag):
+
+| offset | size | type | field | meaning |
+|---:|---:|---|---|---|
+| 0 | 4 | bytes | magic | `b"SMBA"` |
+| 4 | 1 | uint8 | version | 1 |
+| 5 | 1 | uint8 | flags | bit 0: a tag follows the markers; bits 1-7 are 0 |
+| 6 | 2 | uint16 | camera | camera id, 0..65535 |
+| 8 | 4 | uint32 | sequence | frame counter of this camera, wraps from 2^32 - 1 to 0 |
+| 12 | 8 | float64 | timestamp | capture time of the frame, seconds on the node's clock |
+| 20 | 16 | bytes | session | ASCII id `[A-Za-z0-9._-]`, 0..16 characters, NUL-padded |
+| 36 | 64 | float32[8][2] | markers | (u, v) pixels per marker in marker order, NaN = missing |
+| 100 | 16 | bytes | tag | only if flags bit 0: HMAC-SHA256(key, bytes 0..99), first 16 bytes |
+
+Markers follow `samba.skeleton.MARKER_NAMES` (l/r shoulder, l/r wrist, l/r knee, l/r foot)
+with pixels in the OpenCV convention. A missing marker has both coordinates NaN; a
+marker with one NaN coordinate or an infinite one is invalid. The timestamp must be
+finite. The session id lets a server ignore nodes still streaming for another capture
+stage or an earlier session; empty means none.
+
+Signing: with a shared key, the sender appends the tag and sets flags bit 0; a server
+with a key drops untagged packets ("missing tag") and packets whose tag does not match
+("bad tag", compared in constant time); a server without a key drops tagged packets
+("unexpected tag"), since one side is misconfigured. The tag covers the flags, so it
+cannot be stripped unnoticed. It does not stop replays: the server should drop
+sequence numbers it has already passed (`sequence_delta`). Use a random key of 32 bytes.
+
+`decode` checks, in this order, and drops the datagram with the first reason that
+applies: longer than `MAX_PACKET_BYTES` ("too long"); shorter than magic, version and
+flags ("too short"); magic ("bad magic"); version or an unknown flag bit ("unsupported
+version"); shorter than the flags announce ("too short") or longer ("bad length"); tag
+present without a key ("unexpected tag") or absent with one ("missing tag"); the tag
+("bad tag"); the field values ("bad values"). Every valid packet has exactly one
+encoding, so `encode(decode(data, key), key) == data`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import math
+import re
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from samba.skeleton import N_MARKERS
+from service.errors import PacketError
+
+MAGIC = b"SMBA"
+VERSION = 1
+FLAG_TAG = 0x01
+"""Flags bit: an HMAC tag follows the markers."""
+TAG_BYTES = 16
+"""Length of the truncated HMAC-SHA256 tag."""
+SESSION_BYTES = 16
+MAX_PACKET_BYTES = 256
+"""Datagrams longer than this are dropped unread; receive with a buffer one byte larger."""
+
+_HEADER = struct.Struct("<4sBBHId16s")
+_MARKER_DTYPE = np.dtype("<f4")
+HEADER_BYTES = _HEADER.size
+"""Offset of the markers: 36."""
+BODY_BYTES = HEADER_BYTES + N_MARKERS * 2 * _MARKER_DTYPE.itemsize
+"""Length of an untagged packet and offset of the tag: 100."""
+_PREFIX_BYTES = 6
+"""Magic, version and flags: what `decode` needs to know the expected length."""
+_SESSION = re.compile(rf"[A-Za-z0-9._-]{{0,{SESSION_BYTES}}}")
+_SEQUENCE_MODULUS = 2**32
+
+
+@dataclass(frozen=True, eq=False)
+class MarkerPacket:
+    """One camera frame's labelled markers, as a camera node sends it.
+
+    `camera` is 0..65535, `sequence` 0..2^32 - 1 (the sender wraps it), `timestamp` the
+    finite capture time in seconds, `markers` (8, 2) pixels stored as a read-only float32
+    copy (NaN rows = missing), `session` an ASCII id of at most 16 characters from
+    `[A-Za-z0-9._-]`, empty for none. Invalid values raise `ValueError`. Packets compare
+    equal when all fields are equal, NaN markers included.
+    """
+
+    camera: int
+    sequence: int
+    timestamp: float
+    markers: np.ndarray
+    session: str = ""
+
+    def __post_init__(self) -> None:
+        markers = np.array(self.markers, dtype=np.float32)
+        if markers.shape != (N_MARKERS, 2):
+            raise ValueError(f"markers have shape {markers.shape}, expected ({N_MARKERS}, 2)")
+        markers.flags.writeable = False
+        object.__setattr__(self, "markers", markers)
+        if not _is_int(self.camera) or not 0 <= self.camera <= 0xFFFF:
+            raise ValueError(f"camera {self.camera!r} is not an integer in 0..65535")
+        if not _is_int(self.sequence) or not 0 <= self.sequence < _SEQUENCE_MODULUS:
+            raise ValueError(f"sequence {self.sequence!r} is not an integer in 0..2^32 - 1")
+        if not _is_real(self.timestamp) or not math.isfinite(self.timestamp):
+            raise ValueError(f"timestamp {self.timestamp!r} is not a finite number")
+        missing = np.isnan(markers)
+        if not (np.isfinite(markers) | missing).all():
+            raise ValueError("a marker coordinate is infinite")
+        if (missing[:, 0] != missing[:, 1]).any():
+            raise ValueError("a marker has one coordinate NaN and the other not")
+        if not isinstance(self.session, str) or not _SESSION.fullmatch(self.session):
+            raise ValueError(
+                f"session {self.session!r} is not 0..{SESSION_BYTES} characters of [A-Za-z0-9._-]"
+            )
+
+    def __eq__(self, other: object) -> bool:
+        """All fields equal; markers compared with NaN equal to NaN."""
+        if not isinstance(other, MarkerPacket):
+            return NotImplemented
+        return (self.camera, self.sequence, self.timestamp, self.session) == (
+            other.camera,
+            other.sequence,
+            other.timestamp,
+            other.session,
+        ) and np.array_equal(self.markers, other.markers, equal_nan=True)
+
+
+def encode(packet: MarkerPacket, key: bytes | None = None) -> bytes:
+    """The datagram of `packet`, signed with `key` when one is given (see the layout)."""
+    _check_key(key)
+    body = (
+        _HEADER.pack(
+            MAGIC,
+            VERSION,
+            FLAG_TAG if key is not None else 0,
+            packet.camera,
+            packet.sequence,
+            packet.timestamp,
+            packet.session.encode("ascii"),
+        )
+        + packet.markers.astype(_MARKER_DTYPE, copy=False).tobytes()
+    )
+    return body if key is None else body + _tag(key, body)
+
+
+def decode(data: bytes, key: bytes | None = None, *, source: str = "packet") -> MarkerPacket:
+    """The packet in datagram `data`; a server with a `key` accepts only packets signed with it.
+
+    Raises `PacketError` naming `source` (e.g. the sender's address) for any datagram
+    that is not a valid packet, and no other exception whatever the bytes; an empty
+    `key` is a configuration mistake and raises `ValueError`.
+    """
+    _check_key(key)
+    size = len(data)
+    if size > MAX_PACKET_BYTES:
+        raise PacketError(source, "too long", f"{size} bytes, at most {MAX_PACKET_BYTES}")
+    if size < _PREFIX_BYTES:
+        raise PacketError(source, "too short", f"{size} bytes")
+    if data[:4] != MAGIC:
+        raise PacketError(source, "bad magic", f"{bytes(data[:4])!r} instead of {MAGIC!r}")
+    version, flags = data[4], data[5]
+    if version != VERSION:
+        raise PacketError(
+            source, "unsupported version", f"version {version}, this server reads {VERSION}"
+        )
+    if flags & ~FLAG_TAG:
+        raise PacketError(source, "unsupported version", f"unknown flags 0x{flags:02x}")
+    tagged = bool(flags & FLAG_TAG)
+    expected = BODY_BYTES + (TAG_BYTES if tagged else 0)
+    if size < expected:
+        raise PacketError(source, "too short", f"{size} bytes, expected {expected}")
+    if size > expected:
+        raise PacketError(source, "bad length", f"{size} bytes, expected {expected}")
+    if tagged and key is None:
+        raise PacketError(source, "unexpected tag", "signed packet but the server has no key")
+    if key is not None:
+        if not tagged:
+            raise PacketError(source, "missing tag", "the server accepts only signed packets")
+        if not hmac.compare_digest(_tag(key, data[:BODY_BYTES]), data[BODY_BYTES:]):
+            raise PacketError(source, "bad tag", "wrong key or altered packet")
+    _, _, _, camera, sequence, timestamp, session = _HEADER.unpack_from(data)
+    markers = np.frombuffer(data, _MARKER_DTYPE, 2 * N_MARKERS, HEADER_BYTES)
+    try:
+        return MarkerPacket(
+            camera=camera,
+            sequence=sequence,
+            timestamp=timestamp,
+            markers=markers.reshape(N_MARKERS, 2),
+            session=session.rstrip(b"\0").decode("latin-1"),
+        )
+    except ValueError as exc:
+        raise PacketError(source, "bad values", str(exc)) from None
+
+
+def sequence_delta(newer: int, older: int) -> int:
+    """How many frames `newer` is after `older`, across the uint32 wrap (RFC 1982).
+
+    In -2^31..2^31 - 1: negative or zero means `newer` is late or a duplicate.
+    """
+    delta = (newer - older) % _SEQUENCE_MODULUS
+    return delta - _SEQUENCE_MODULUS if delta >= _SEQUENCE_MODULUS // 2 else delta
+
+
+def _tag(key: bytes, body: bytes) -> bytes:
+    return hmac.new(key, body, hashlib.sha256).digest()[:TAG_BYTES]
+
+
+def _check_key(key: bytes | None) -> None:
+    if key is not None and len(key) == 0:
+        raise ValueError("the HMAC key is empty; pass None to send or accept unsigned packets")
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_real(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
