@@ -27,7 +27,6 @@ length to the subject's, so the avatar's feet stay on the floor and its steps ma
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from export.humanoid import CAPTURE_JOINT, N_BONES, PARENTS, HumanoidRig
 from export.motion import HumanoidMotion
@@ -59,12 +58,39 @@ _LIMBS: tuple[
     (11, 12, 13, 0, (0.0, -1.0, 0.1), (0.0, 0.0, -1.0)),
     (14, 15, 16, 0, (0.0, -1.0, 0.1), (0.0, 0.0, -1.0)),
 )
+_TORSO: tuple[tuple[int, tuple[int, int], tuple[int, int]], ...] = (
+    # (bone, primary line, secondary line), a line running (from bone, to bone) between joints
+    (0, (14, 11), (0, 3)),  # Hips: hip line, then spine
+    (2, (8, 5), (0, 3)),  # Chest: shoulder line, then spine
+    (3, (3, 4), (8, 5)),  # Neck: neck, then shoulder line
+)
+"""Torso bones whose frames come from two lines of their joints, captured or at rest."""
 _STRAIGHT = (np.sin(np.radians(2.0)), np.sin(np.radians(25.0)))
 """Bend (as sine of the angle) below which a limb counts as straight, above which its
 plane alone gives the bend axis."""
 _LEVEL_FOOT = (0.5, 0.8)
 """Horizontal share of the knee axis below which a foot follows its shin, above which it
 stays level."""
+
+_PARENTS = np.array(PARENTS)
+_CAPTURED_BONES = np.array(list(CAPTURE_JOINT))
+_CAPTURED_JOINTS = np.array(list(CAPTURE_JOINT.values()))
+_TORSO_BONES = np.array([bone for bone, _, _ in _TORSO])
+_TORSO_PRIMARY = np.array([line for _, line, _ in _TORSO]).T
+_TORSO_SECONDARY = np.array([line for _, _, line in _TORSO]).T
+_UPPER, _LOWER, _END, _LIMB_PARENT = np.array([limb[:4] for limb in _LIMBS]).T
+_SEGMENTS = np.concatenate([_UPPER, _LOWER])
+"""Limb bones framed by their segment and the limb's bend axis; `_SEGMENT_ENDS` end them."""
+_SEGMENT_ENDS = np.concatenate([_LOWER, _END])
+_LEGS = np.flatnonzero(_LIMB_PARENT == 0)
+"""The limbs hanging from the Hips, whose end bones (Feet) stand level."""
+_FEET, _SHINS = _END[_LEGS], _LOWER[_LEGS]
+_AFTER_TORSO = np.concatenate([[1], _SEGMENTS, _FEET])
+"""Bones framed once the torso's rotations are known: Spine, limb segments, level Feet."""
+_FOLLOWERS = np.array([4, 7, 10])
+"""Head and Hands: they turn with their parents."""
+_NEXT = np.array([1, 2, 0])
+"""Each vector component's successor, cyclically (for `_cross`)."""
 
 
 def capture_points(poses: np.ndarray) -> np.ndarray:
@@ -73,14 +99,13 @@ def capture_points(poses: np.ndarray) -> np.ndarray:
     3/5 of the way between them, the others at their 13-joint joint."""
     poses = np.asarray(poses, dtype=np.float64)
     out = np.empty((*poses.shape[:-2], N_BONES, 3))
-    pelvis = (poses[..., 7, :] + poses[..., 8, :]) / 2
+    pelvis = _hip_middle(poses)
     neck = (poses[..., 1, :] + poses[..., 2, :]) / 2
     out[..., 0, :] = pelvis
     out[..., 1, :] = pelvis + 0.25 * (neck - pelvis)
     out[..., 2, :] = pelvis + 0.6 * (neck - pelvis)
     out[..., 3, :] = neck
-    for bone, joint in CAPTURE_JOINT.items():
-        out[..., bone, :] = poses[..., joint, :]
+    out[..., _CAPTURED_BONES, :] = poses[..., _CAPTURED_JOINTS, :]
     return out
 
 
@@ -92,7 +117,7 @@ def bone_direction_errors(avatar: np.ndarray, poses: np.ndarray) -> np.ndarray:
     a = np.stack([avatar[:, j] - avatar[:, i] for _, i, j in MEASURED_BONES], axis=1)
     c = np.stack([capture[:, j] - capture[:, i] for _, i, j in MEASURED_BONES], axis=1)
     cos = np.sum(_unit(a) * _unit(c), axis=-1)
-    sin = np.linalg.norm(np.cross(_unit(a), _unit(c)), axis=-1)
+    sin = np.linalg.norm(_cross(_unit(a), _unit(c)), axis=-1)
     return np.degrees(np.arctan2(sin, cos))
 
 
@@ -113,151 +138,242 @@ def retarget(poses: np.ndarray, rig: HumanoidRig, fps: float) -> HumanoidMotion:
         raise ValueError(f"retarget needs poses of shape (n, 13, 3), got {poses.shape}")
     if not np.isfinite(poses).all():
         raise ValueError("retarget needs finite poses (fill or drop frames with NaN first)")
-    world = _world_rotations(capture_points(poses), rig.rest)
-    parents = np.array(PARENTS)
-    local = world.copy()
-    local[:, 1:] = np.swapaxes(world[:, parents[1:]], -1, -2) @ world[:, 1:]
-    n = len(poses)
-    rotations = Rotation.from_matrix(local.reshape(-1, 3, 3)).as_quat().reshape(n, N_BONES, 4)
-    scale = rig.leg_length / leg_length(poses)
-    root = capture_points(poses)[:, 0] * scale + [0.0, rig.ankle_height, 0.0]
+    rotations, _ = local_rotations(poses, rig)
+    root = root_positions(poses, rig, leg_length(poses))
     return HumanoidMotion(rig=rig, rotations=rotations, root=root, fps=fps)
 
 
-def _world_rotations(capture: np.ndarray, rest: np.ndarray) -> np.ndarray:
-    """World rotations (n, 17, 3, 3) taking the rig's rest bones to the captured ones."""
-    n = len(capture)
-    world = np.empty((n, N_BONES, 3, 3))
-    spine = capture[:, 3] - capture[:, 0]
-    spine_rest = rest[3] - rest[0]
-    hip_line = capture[:, 11] - capture[:, 14]
-    shoulder_line = capture[:, 5] - capture[:, 8]
-    world[:, 0] = _frame(hip_line, spine) @ _frame(rest[11] - rest[14], spine_rest).T
-    world[:, 2] = _frame(shoulder_line, spine) @ _frame(rest[5] - rest[8], spine_rest).T
-    world[:, 1] = _spine_rotation(world[:, 0], world[:, 2], spine, rest)
-    world[:, 3] = (
-        _frame(capture[:, 4] - capture[:, 3], shoulder_line)
-        @ _frame(rest[4] - rest[3], rest[5] - rest[8]).T
+def rest_frames(rig: HumanoidRig) -> np.ndarray:
+    """The frames (17, 3, 3) of `rig`'s rest bones that retargeting turns onto the captured
+    ones, transposed (inverted): a bone's world rotation is its captured frame times this.
+
+    They depend on the rig alone, so a caller retargeting many takes of one rig (the live
+    service) computes them once for `local_rotations`. Head and Hands, which turn with
+    their parents, get the identity; the Feet the level foot's frame (up, then +X).
+    """
+    rest = rig.rest
+    frames = np.tile(np.eye(3), (N_BONES, 1, 1))
+    frames[_TORSO_BONES] = _frame(_lines(rest, _TORSO_PRIMARY), _lines(rest, _TORSO_SECONDARY))
+    frames[1] = _frame(rest[2] - rest[1], rest[11] - rest[14])
+    axes, _ = _bend_axis(
+        (rest[_LOWER] - rest[_UPPER])[None],
+        (rest[_END] - rest[_LOWER])[None],
+        np.broadcast_to(np.eye(3), (1, len(_LIMBS), 3, 3)),
     )
-    world[:, 4] = world[:, 3]
-    for upper, lower, end, parent, reference, bend in _LIMBS:
-        reference = _unit(np.array(reference))
-        bend_ref = _unit(np.cross(reference, bend))
-        rest_axis = _bend_axis(
-            rest[None, lower] - rest[upper],
-            rest[None, end] - rest[lower],
-            np.eye(3)[None],
-            reference,
-            bend_ref,
-        )[0]
-        axis = _bend_axis(
-            capture[:, lower] - capture[:, upper],
-            capture[:, end] - capture[:, lower],
-            world[:, parent],
-            reference,
-            bend_ref,
-        )
-        for bone, child in ((upper, lower), (lower, end)):
-            world[:, bone] = (
-                _frame(capture[:, child] - capture[:, bone], axis)
-                @ _frame(rest[child] - rest[bone], rest_axis).T
-            )
-        world[:, end] = world[:, lower]
-        if parent == 0:
-            world[:, end] = _level_foot(world[:, lower], axis)
-    return world
+    frames[_SEGMENTS] = _frame(
+        rest[_SEGMENT_ENDS] - rest[_SEGMENTS], np.concatenate([axes[0], axes[0]])
+    )
+    frames[_FEET] = _frame(_UP, _X)
+    return np.ascontiguousarray(frames.swapaxes(-1, -2))
 
 
-def _spine_rotation(
+def local_rotations(
+    poses: np.ndarray, rig: HumanoidRig, frames: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Local bone rotations of `rig` for finite captured poses (n, 13, 3) in meters, and
+    which frames the limbs are bent in; `frames` are the rig's `rest_frames`, computed
+    here if not given.
+
+    Returns `rotations` (n, 17, 4), quaternions (x, y, z, w) with each frame's sign as
+    scipy's `Rotation.from_matrix` gives it (`HumanoidMotion` makes them
+    hemisphere-continuous), and `bent` (n, 4) bool, one column per limb (left arm, right
+    arm, left leg, right leg): the frames whose limb plane alone gives the bend axis,
+    which nearly straight later frames of that limb carry along.
+    """
+    if frames is None:
+        frames = rest_frames(rig)
+    world, bent = _world_rotations(capture_points(poses), rig.rest, frames)
+    local = world.copy()
+    local[:, 1:] = world[:, _PARENTS[1:]].swapaxes(-1, -2) @ world[:, 1:]
+    return _quaternions(local), bent
+
+
+def root_positions(poses: np.ndarray, rig: HumanoidRig, subject_leg_length: float) -> np.ndarray:
+    """Hips positions (n, 3) in meters for captured poses (n, 13, 3) in meters: the hip
+    middle scaled by the ratio of the rig's leg length to `subject_leg_length` (meters)
+    and lifted by the rig's ankle height."""
+    scale = rig.leg_length / subject_leg_length
+    return _hip_middle(np.asarray(poses, dtype=np.float64)) * scale + [0.0, rig.ankle_height, 0.0]
+
+
+def _world_rotations(
+    capture: np.ndarray, rest: np.ndarray, frames: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations (n, 17, 3, 3) taking the rig's rest bones (`rest` (17, 3), its
+    `rest_frames` `frames`) to the captured ones (n, 17, 3), and whether each of `_LIMBS`
+    is fully bent (n, 4) bool."""
+    world = np.empty((len(capture), N_BONES, 3, 3))
+    world[:, _TORSO_BONES] = (
+        _frame(_lines(capture, _TORSO_PRIMARY), _lines(capture, _TORSO_SECONDARY))
+        @ frames[_TORSO_BONES]
+    )
+    segments = capture[:, _SEGMENT_ENDS] - capture[:, _SEGMENTS]  # upper ones, lower ones
+    limbs = len(_LIMBS)
+    axes, bent = _bend_axis(segments[:, :limbs], segments[:, limbs:], world[:, _LIMB_PARENT])
+    spine, lateral = _spine_directions(
+        world[:, 0], world[:, 2], capture[:, 3] - capture[:, 0], rest
+    )
+    knee = axes[:, _LEGS] * [1.0, 0.0, 1.0]
+    horizontal = _norm(knee)
+    # The `_AFTER_TORSO` bones in one batch, the Feet level and turned to the knee axis.
+    primary = np.concatenate([spine[:, None], segments, np.full_like(knee, _UP)], axis=1)
+    secondary = np.concatenate(
+        [lateral[:, None], axes, axes, np.where(horizontal > 1e-6, knee, _X)], axis=1
+    )
+    world[:, _AFTER_TORSO] = _frame(primary, secondary) @ frames[_AFTER_TORSO]
+    world[:, _FOLLOWERS] = world[:, _PARENTS[_FOLLOWERS]]
+    world[:, _FEET] = _feet(world[:, _FEET], world[:, _SHINS], horizontal)
+    return world, bent
+
+
+def _spine_directions(
     hips: np.ndarray, chest: np.ndarray, spine: np.ndarray, rest: np.ndarray
-) -> np.ndarray:
-    """Spine's world rotations (n, 3, 3) that put the Neck joint on the captured spine line
-    given the Hips and Chest rotations (the Hips-Spine and Chest-Neck offsets are rigid)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """The Spine bone's direction (n, 3), Spine to Chest joint, that puts the Neck joint on
+    the captured `spine` line (n, 3) given the Hips and Chest world rotations (n, 3, 3)
+    (the Hips-Spine and Chest-Neck offsets are rigid), and the direction (n, 3) its frame
+    takes second: the sum of the Hips' and the Chest's x axes (their hip lines)."""
     o1, o2, o3 = rest[1] - rest[0], rest[2] - rest[1], rest[3] - rest[2]
     u = hips @ o1 + chest @ o3
     d = _unit(spine)
-    t = np.sum(d * u, axis=-1)
-    reach = np.sqrt(np.maximum(t**2 - np.sum(u * u, axis=-1) + o2 @ o2, 0.0))
-    target = (t + reach)[:, None] * d - u
-    lateral = hips[..., 0] + chest[..., 0]
-    lateral_rest = rest[11] - rest[14]
-    return _frame(target, lateral) @ _frame(o2, lateral_rest).T
+    t = _dot(d, u)
+    reach = np.sqrt(np.maximum(t**2 - _dot(u, u) + o2 @ o2, 0.0))
+    return (t + reach) * d - u, hips[..., 0] + chest[..., 0]
 
 
 def _bend_axis(
-    upper: np.ndarray,
-    lower: np.ndarray,
-    parent: np.ndarray,
-    reference: np.ndarray,
-    bend_ref: np.ndarray,
-) -> np.ndarray:
-    """Unit bend axes (n, 3) of limbs with segments `upper`, `lower` (n, 3) over a take.
+    upper: np.ndarray, lower: np.ndarray, parent: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unit bend axes (n, 4, 3) of the `_LIMBS` with segments `upper`, `lower` (n, 4, 3)
+    over a take, and which frames are fully bent (n, 4) bool (their plane alone gives the
+    axis).
 
-    Where the limb is bent, the limb plane's normal. Where it is nearly straight, the
-    axis of the last bent frame, carried along with the parent (`parent` (n, 3, 3) world
+    Where a limb is bent, the limb plane's normal. Where it is nearly straight, the axis
+    of its last bent frame, carried along with its parent (`parent` (n, 4, 3, 3) world
     rotations) and swung with the limb, or before any bent frame the reference axis
     swung from the reference direction; in between the two turn into each other about
     the limb. Only earlier frames are used, so a live stream gets the same axes.
     """
     u = _unit(upper)
-    plane = np.cross(u, _unit(lower))
-    sine = np.linalg.norm(plane, axis=-1)
-    plane = plane / np.maximum(sine, 1e-12)[..., None]
+    plane = _cross(u, _unit(lower))
+    sine = _norm(plane)
+    plane = plane / np.maximum(sine, 1e-12)
     w = np.clip((sine - _STRAIGHT[0]) / (_STRAIGHT[1] - _STRAIGHT[0]), 0.0, 1.0)
     w = w * w * (3 - 2 * w)
-    fallback = _swing(parent @ reference, u, parent @ bend_ref)
-    frames = np.arange(len(u))
-    last_bent = np.maximum.accumulate(np.where(w == 1.0, frames, -1))
-    carried = last_bent >= 0
-    if carried.any():
-        k = last_bent[carried]
-        to_now = parent[carried] @ np.swapaxes(parent[k], -1, -2)
-        fallback[carried] = _swing(
-            _unit(np.einsum("nij,nj->ni", to_now, u[k])),
-            u[carried],
-            np.einsum("nij,nj->ni", to_now, plane[k]),
-        )
-    fallback = _unit(fallback - np.sum(fallback * u, axis=-1, keepdims=True) * u)
-    angle = np.arctan2(
-        np.sum(u * np.cross(fallback, plane), axis=-1), np.sum(fallback * plane, axis=-1)
-    )
-    turn = (w * angle)[:, None]
-    return fallback * np.cos(turn) + np.cross(u, fallback) * np.sin(turn)
+    bent = w[..., 0] == 1.0
+    last_bent = np.maximum.accumulate(np.where(bent, np.arange(len(u))[:, None], -1), axis=0)
+    # The limb direction and bend axis (columns) in the parent's frame, of the last bent
+    # frame or else the reference ones, turned with the parent and swung onto the limb.
+    in_parent = parent.swapaxes(-1, -2) @ np.stack([u, plane], axis=-1)
+    kept = in_parent[np.maximum(last_bent, 0), np.arange(len(_LIMBS))]
+    moved = parent @ np.where((last_bent >= 0)[..., None, None], kept, _REFERENCE_AXES)
+    fallback = _swing(_unit(moved[..., 0]), u, moved[..., 1])
+    fallback = _unit(fallback - _dot(fallback, u) * u)
+    angle = np.arctan2(_dot(u, _cross(fallback, plane)), _dot(fallback, plane))
+    turn = w * angle
+    return fallback * np.cos(turn) + _cross(u, fallback) * np.sin(turn), bent
 
 
 def _swing(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """`v` (n, 3) turned by the shortest rotation taking unit `a` to unit `b` (n, 3)."""
-    axis = np.cross(a, b)
-    c = np.sum(a * b, axis=-1, keepdims=True)
+    """`v` (..., 3) turned by the shortest rotation taking unit `a` to unit `b` (..., 3)."""
+    axis = _cross(a, b)
+    c = _dot(a, b)
     k = 1.0 / np.maximum(1.0 + c, 1e-9)
-    return v * c + np.cross(axis, v) + axis * np.sum(axis * v, axis=-1, keepdims=True) * k
+    return v * c + _cross(axis, v) + axis * _dot(axis, v) * k
 
 
-def _level_foot(shin: np.ndarray, knee_axis: np.ndarray) -> np.ndarray:
-    """Foot world rotations (n, 3, 3): level and turned to the knee axis where that axis is
-    near horizontal, otherwise the shin's rotation (blended in between)."""
-    lateral = knee_axis * [1.0, 0.0, 1.0]
-    share = np.linalg.norm(lateral, axis=-1)
-    up = np.broadcast_to([0.0, 1.0, 0.0], lateral.shape)
-    level = _frame(up, np.where(share[:, None] > 1e-6, lateral, [1.0, 0.0, 0.0]))
-    level = level @ _frame(np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])).T
-    w = np.clip((share - _LEVEL_FOOT[0]) / (_LEVEL_FOOT[1] - _LEVEL_FOOT[0]), 0.0, 1.0)
+def _feet(level: np.ndarray, shin: np.ndarray, horizontal: np.ndarray) -> np.ndarray:
+    """Foot world rotations (..., 3, 3): the `level` ones where the knee axis is near
+    horizontal (`horizontal` (..., 1), the length of its horizontal part), otherwise the
+    `shin`'s (blended in between)."""
+    w = np.clip((horizontal - _LEVEL_FOOT[0]) / (_LEVEL_FOOT[1] - _LEVEL_FOOT[0]), 0.0, 1.0)
     if np.all(w == 1.0):
         return level
-    q_level = Rotation.from_matrix(level).as_quat()
-    q_shin = Rotation.from_matrix(shin).as_quat()
-    q_shin *= np.where(np.sum(q_level * q_shin, axis=-1) < 0, -1.0, 1.0)[:, None]
-    q = w[:, None] * q_level + (1 - w[:, None]) * q_shin
-    return Rotation.from_quat(q).as_matrix()
+    q_level = _quaternions(level)
+    q_shin = _quaternions(shin)
+    q_shin *= np.where(_dot(q_level, q_shin) < 0, -1.0, 1.0)
+    return _rotation_matrices(w * q_level + (1 - w) * q_shin)
 
 
 def _frame(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:
     """Orthonormal frames (..., 3, 3) whose columns are `primary`, the part of `secondary`
     orthogonal to it, and their cross product (all normalised)."""
     e1 = _unit(primary)
-    e2 = _unit(secondary - np.sum(secondary * e1, axis=-1, keepdims=True) * e1)
-    return np.stack([e1, e2, np.cross(e1, e2)], axis=-1)
+    e2 = _unit(secondary - _dot(secondary, e1) * e1)
+    return np.stack([e1, e2, _cross(e1, e2)], axis=-1)
+
+
+def _quaternions(matrices: np.ndarray) -> np.ndarray:
+    """Unit quaternions (..., 4), (x, y, z, w), of rotation matrices (..., 3, 3), with the
+    signs scipy's `Rotation.from_matrix` gives them.
+
+    As scipy does, picks the largest of the diagonal and the trace, and takes the
+    quaternion whose matching component is built from it (so positive): a row of the
+    symmetric matrix K with upper left block M + M^T + (1 - trace) I, last row and column
+    the skew part of M and corner 1 + trace.
+    """
+    shape = matrices.shape[:-2]
+    diagonal = matrices.diagonal(axis1=-2, axis2=-1)
+    trace = diagonal.sum(axis=-1)
+    k = np.empty((*shape, 4, 4))
+    np.add(matrices, matrices.swapaxes(-1, -2), out=k[..., :3, :3])
+    k.reshape(*shape, 16)[..., 0:15:5] += (1 - trace)[..., None]  # the diagonal
+    skew = matrices - matrices.swapaxes(-1, -2)  # entries (2, 1), (0, 2), (1, 0) of it
+    k[..., 3, :3] = k[..., :3, 3] = skew.reshape(*shape, 9).take([7, 2, 3], axis=-1)
+    k[..., 3, 3] = 1 + trace
+    choice = np.argmax(np.concatenate([diagonal, trace[..., None]], axis=-1), axis=-1)
+    rows = k.reshape(-1, 4, 4)[np.arange(choice.size), choice.ravel()]
+    return _unit(rows).reshape(*shape, 4)
+
+
+def _rotation_matrices(quaternions: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4), (x, y, z, w), normalised
+    first: (w^2 - v.v) I + 2 v v^T + 2 w [v]x for the unit quaternion (v, w)."""
+    q = _unit(quaternions)
+    v, w = q[..., :3], q[..., 3:]
+    skew = _cross(v[..., None, :], np.eye(3)).swapaxes(-1, -2)
+    return (
+        (w * w - _dot(v, v))[..., None] * np.eye(3)
+        + 2 * v[..., :, None] * v[..., None, :]
+        + 2 * w[..., None] * skew
+    )
+
+
+def _hip_middle(poses: np.ndarray) -> np.ndarray:
+    """The middle (..., 3) of the hip joints of poses (..., 13, 3)."""
+    return (poses[..., 7, :] + poses[..., 8, :]) / 2
+
+
+def _lines(points: np.ndarray, lines: np.ndarray) -> np.ndarray:
+    """Vectors (..., k, 3) between points (..., 17, 3) along `lines` (2, k): from, to."""
+    return points[..., lines[1], :] - points[..., lines[0], :]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products (..., 3) of vectors `a`, `b` (..., 3), broadcast: np.cross's formula
+    and results, without its overhead on small arrays."""
+    return (a * b.take(_NEXT, axis=-1) - a.take(_NEXT, axis=-1) * b).take(_NEXT, axis=-1)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products (..., 1) of vectors `a`, `b` (..., 3)."""
+    return (a * b).sum(axis=-1, keepdims=True)
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Lengths (..., 1) of vectors (..., 3)."""
+    return np.sqrt(_dot(v, v))
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+    return v / np.maximum(_norm(v), 1e-12)
+
+
+# Constants made with the helpers above.
+_REFERENCE = _unit(np.array([limb[4] for limb in _LIMBS]))
+_REFERENCE_AXES = np.stack(
+    [_REFERENCE, _unit(_cross(_REFERENCE, np.array([limb[5] for limb in _LIMBS])))], axis=-1
+)
+"""Each limb's reference direction and the bend axis that goes with it: columns (4, 3, 2)."""
+_UP = np.array([0.0, 1.0, 0.0])
+_X = np.array([1.0, 0.0, 0.0])

@@ -33,3 +33,26 @@ def positive_float(text: str) -> float:
     if not 0 < value < float("inf"):
         raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
     return value
+
+
+def address(text: str) -> tuple[str, int]:
+    """(host, port) from a `HOST:PORT` word (IPv4 address or host name, port 1..65535)."""
+    return _host_port(text, lowest_port=1)
+
+
+def bind_address(text: str) -> tuple[str, int]:
+    """(host, port) to listen on from a `HOST:PORT` word; port 0 = any free port."""
+    return _host_port(text, lowest_port=0)
+
+
+def _host_port(text: str, lowest_port: int) -> tuple[str, int]:
+    host, sep, port_text = text.rpartition(":")
+    if not sep or not host:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {text!r}")
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"port is not an integer in {text!r}") from None
+    if not lowest_port <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port must be {lowest_port}..65535 in {text!r}")
+    return host, port

@@ -49,11 +49,12 @@ import math
 import re
 import struct
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from samba.skeleton import N_MARKERS
-from service.errors import PacketError
+from service.errors import PacketError, ServiceError
 
 MAGIC = b"SMBA"
 VERSION = 1
@@ -62,6 +63,8 @@ FLAG_TAG = 0x01
 TAG_BYTES = 16
 """Length of the truncated HMAC-SHA256 tag."""
 SESSION_BYTES = 16
+MIN_KEY_BYTES = 16
+"""Shortest shared key `read_key_file` accepts."""
 MAX_PACKET_BYTES = 256
 """Datagrams longer than this are dropped unread; receive with a buffer one byte larger."""
 
@@ -202,6 +205,24 @@ def sequence_delta(newer: int, older: int) -> int:
     """
     delta = (newer - older) % _SEQUENCE_MODULUS
     return delta - _SEQUENCE_MODULUS if delta >= _SEQUENCE_MODULUS // 2 else delta
+
+
+def read_key_file(path: str | Path) -> bytes:
+    """The shared HMAC key stored in a file: its raw bytes, at least `MIN_KEY_BYTES`.
+
+    `ServiceError` naming the file when it cannot be read or is too short. Make one with
+    e.g. `head -c 32 /dev/urandom > samba.key` and give the same file to the server and
+    every camera node.
+    """
+    try:
+        key = Path(path).read_bytes()
+    except OSError as exc:
+        raise ServiceError(str(path), f"cannot read the key file: {exc.strerror or exc}") from None
+    if len(key) < MIN_KEY_BYTES:
+        raise ServiceError(
+            str(path), f"a key file holds at least {MIN_KEY_BYTES} bytes, this one {len(key)}"
+        )
+    return key
 
 
 def _tag(key: bytes, body: bytes) -> bytes:

@@ -16,11 +16,11 @@ EVMC4U apply them and our bone lengths would stretch a different avatar.
 from __future__ import annotations
 
 import socket
+import struct
 from collections.abc import Iterable
 
 import numpy as np
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
@@ -34,7 +34,6 @@ MAX_BUNDLE_BYTES = 1400
 
 _MIRROR_POSITION = np.array([-1.0, 1.0, 1.0])
 _MIRROR_QUATERNION = np.array([1.0, -1.0, -1.0, 1.0])
-_BUNDLE_HEADER = 16  # "#bundle\0" and the timetag
 _ROOT = ("root", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 
 
@@ -44,14 +43,23 @@ def unity_pose(
     """A whole motion's local bone poses in Unity's convention, in `BONE_NAMES` order.
 
     Returns positions (n, 17, 3) in meters and quaternions (n, 17, 4) (x, y, z, w), both
-    float64 and X-mirrored. The Hips position is the motion's root; the other bones'
-    positions are the rest offsets from their parents of `avatar`, the receiving avatar's
-    rig (default: the motion's own rig).
+    float64 and X-mirrored (see `unity_values`), with the bone offsets of `avatar`, the
+    receiving avatar's rig (default: the motion's own rig).
     """
-    avatar = avatar or motion.rig
-    positions = np.broadcast_to(avatar.offsets, (len(motion), N_BONES, 3)).copy()
-    positions[:, 0] = motion.root
-    return positions * _MIRROR_POSITION, motion.rotations * _MIRROR_QUATERNION
+    return unity_values(motion.root, motion.rotations, avatar or motion.rig)
+
+
+def unity_values(
+    root: np.ndarray, rotations: np.ndarray, avatar: HumanoidRig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unity-convention local poses of frames given as root positions (..., 3) meters and
+    local quaternions (..., 17, 4) (x, y, z, w) in our frame: positions (..., 17, 3) and
+    quaternions (..., 17, 4), X-mirrored. The Hips position is the root; the other
+    bones' positions are `avatar`'s rest offsets from their parents."""
+    root = np.asarray(root, dtype=np.float64)
+    positions = np.broadcast_to(avatar.offsets, (*root.shape[:-1], N_BONES, 3)).copy()
+    positions[..., 0, :] = root
+    return positions * _MIRROR_POSITION, np.asarray(rotations) * _MIRROR_QUATERNION
 
 
 def frame_bundles(positions: np.ndarray, rotations: np.ndarray, time_s: float) -> list[bytes]:
@@ -68,13 +76,10 @@ def frame_bundles(positions: np.ndarray, rotations: np.ndarray, time_s: float) -
             f"a VMC frame needs positions (17, 3) and rotations (17, 4), got "
             f"{positions.shape} and {rotations.shape}"
         )
-    values = np.concatenate([positions, rotations], axis=1).tolist()
-    messages = [_message("/VMC/Ext/Root/Pos", "s" + "f" * 7, _ROOT)]
-    messages += [
-        _message("/VMC/Ext/Bone/Pos", "s" + "f" * 7, (name, *v))
-        for name, v in zip(BONE_NAMES, values, strict=True)
-    ]
-    messages += [_message("/VMC/Ext/OK", "i", (1,)), _message("/VMC/Ext/T", "f", (time_s,))]
+    values = np.concatenate([positions, rotations], axis=1).astype(">f4")
+    messages = [_ROOT_MESSAGE]
+    messages += [prefix + row.tobytes() for prefix, row in zip(_BONE_PREFIXES, values, strict=True)]
+    messages += [_OK_MESSAGE, _T_PREFIX + struct.pack(">f", time_s)]
     return _pack(messages)
 
 
@@ -123,31 +128,45 @@ class VmcSender:
         self.close()
 
 
-def _message(address: str, types: str, args: tuple) -> OscMessage:
+def _message(address: str, types: str, args: tuple) -> bytes:
+    """One OSC message as python-osc encodes it."""
     builder = OscMessageBuilder(address=address)
     for arg_type, arg in zip(types, args, strict=True):
         builder.add_arg(arg, arg_type)
-    return builder.build()
+    return builder.build().dgram
 
 
-def _pack(messages: list[OscMessage]) -> list[bytes]:
+def _prefix(address: str, name: str | None, floats: int) -> bytes:
+    """The bytes of a message with an optional leading string argument `name` and
+    `floats` float32 arguments, up to where the floats start: address, type tags and
+    name do not change from frame to frame, so frames append only the floats."""
+    head = () if name is None else (name,)
+    types = ("" if name is None else "s") + "f" * floats
+    return _message(address, types, (*head, *[0.0] * floats))[: -4 * floats]
+
+
+_ROOT_MESSAGE = _message("/VMC/Ext/Root/Pos", "s" + "f" * 7, _ROOT)
+_BONE_PREFIXES = [_prefix("/VMC/Ext/Bone/Pos", name, 7) for name in BONE_NAMES]
+_OK_MESSAGE = _message("/VMC/Ext/OK", "i", (1,))
+_T_PREFIX = _prefix("/VMC/Ext/T", None, 1)
+_BUNDLE_START = OscBundleBuilder(IMMEDIATELY).build().dgram
+"""`#bundle`, NUL and the timetag IMMEDIATELY: the first 16 bytes of every bundle."""
+
+
+def _pack(messages: list[bytes]) -> list[bytes]:
     """Messages in order, greedily packed into IMMEDIATELY bundles of at most
-    `MAX_BUNDLE_BYTES` (a bundle element is its 4-byte size and the message)."""
-    groups: list[list[OscMessage]] = [[]]
-    size = _BUNDLE_HEADER
+    `MAX_BUNDLE_BYTES` (a bundle element is its 4-byte big-endian size and the message)."""
+    bundles: list[bytes] = []
+    parts = [_BUNDLE_START]
+    size = len(_BUNDLE_START)
     for message in messages:
-        element = 4 + message.size
-        if groups[-1] and size + element > MAX_BUNDLE_BYTES:
-            groups.append([])
-            size = _BUNDLE_HEADER
-        groups[-1].append(message)
+        element = 4 + len(message)
+        if len(parts) > 1 and size + element > MAX_BUNDLE_BYTES:
+            bundles.append(b"".join(parts))
+            parts, size = [_BUNDLE_START], len(_BUNDLE_START)
+        parts += [struct.pack(">i", len(message)), message]
         size += element
-    bundles = []
-    for group in groups:
-        builder = OscBundleBuilder(IMMEDIATELY)
-        for message in group:
-            builder.add_content(message)
-        bundles.append(builder.build().dgram)
+    bundles.append(b"".join(parts))
     return bundles
 
 

@@ -1,4 +1,5 @@
-"""Shared fixtures: the real CMU data (skipped with a reason where absent)."""
+"""Shared fixtures: the real CMU data (skipped with a reason where absent), and the
+synthetic stage of the live service tests."""
 
 from __future__ import annotations
 
@@ -6,6 +7,10 @@ import os
 from pathlib import Path
 
 import pytest
+
+from db.synthetic_store import build_synthetic_store
+from samba.calibration_file import write_calibration
+from service.synthetic_capture import SyntheticCapture
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -35,3 +40,27 @@ def cmu_dir() -> Path:
 def cmu_files(cmu_dir: Path) -> list[Path]:
     """Every BVH file of the shared CMU data, sorted."""
     return sorted(cmu_dir.glob("*.bvh"))
+
+
+@pytest.fixture(scope="session")
+def live_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A pose store of the built-in synthetic motions (the live service tests' database)."""
+    path = tmp_path_factory.mktemp("serve") / "db"
+    build_synthetic_store(path, takes_per_motion=2, seconds=4.0, seed=5)
+    return path
+
+
+@pytest.fixture(scope="session")
+def live_capture() -> SyntheticCapture:
+    """2 s of a held-out synthetic walk at 60 fps filmed by two 640x480 cameras."""
+    return SyntheticCapture.film("walk", seconds=2.0, fps=60.0, size=(640, 480), seed=11)
+
+
+@pytest.fixture(scope="session")
+def live_calibration(
+    live_capture: SyntheticCapture, tmp_path_factory: pytest.TempPathFactory
+) -> Path:
+    """The calibration file of `live_capture`'s cameras."""
+    path = tmp_path_factory.mktemp("calib") / "stage.toml"
+    write_calibration(path, live_capture.cameras)
+    return path

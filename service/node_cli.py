@@ -1,0 +1,290 @@
+"""`samba node`: one camera node of the live service (`service.node`).
+
+Reads frames from exactly one source (a video file, an image folder, a webcam or one
+camera of the synthetic rig), detects and tracks the 8 markers and sends one UDP packet
+per frame to the server. `--camera N` is both the packet's camera id and the camera's
+place in the calibration file: the N-th camera table of the file, counted from 0.
+The run ends when the source does (never with `--loop` or a webcam) or on Ctrl-C, and
+prints a one-line summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import sys
+import time
+from collections.abc import Iterator
+
+import numpy as np
+
+from samba.calibration_file import read_calibration
+from samba.camera import Camera
+from samba.cli_arguments import address, natural, positive_float
+from samba.errors import InputError
+from samba.frame_source import open_frames
+from samba.skeleton import N_MARKERS
+from samba.synthetic import MOTIONS
+from service.node import (
+    DEFAULT_FPS,
+    DEFAULT_PORT,
+    CameraNode,
+    Capture,
+    FileFeed,
+    PacketSender,
+    SubjectStart,
+    SyntheticFeed,
+    WebcamFeed,
+    run_node,
+    synthetic_lead_in,
+)
+from service.packet import MIN_KEY_BYTES, MarkerPacket, read_key_file
+
+START_DELAY_SECONDS = 0.5
+"""How far ahead of now the synthetic capture starts when `--start-at` is not given."""
+DEFAULT_SYNTHETIC_SECONDS = 10.0
+"""Length of the synthetic motion (after the 1-s standing lead-in) by default."""
+
+SOURCES = ("video", "images", "webcam", "synthetic")
+"""The source flags, exactly one of which is given."""
+_SCOPES: dict[str, tuple[str, ...]] = {
+    "seconds": ("synthetic",),
+    "seed": ("synthetic",),
+    "start_at": ("synthetic",),
+    "start_x": ("video", "images", "webcam"),
+    "start_z": ("video", "images", "webcam"),
+    "heading": ("video", "images", "webcam"),
+    "height": ("video", "images", "webcam"),
+    "no_pace": ("video", "images", "synthetic"),
+    "loop": ("video", "images", "synthetic"),
+}
+"""Flags that apply to some sources only -> those sources."""
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    """Add the `node` arguments to `parser`."""
+    parser.add_argument(
+        "--server",
+        type=address,
+        default=("127.0.0.1", DEFAULT_PORT),
+        metavar="HOST:PORT",
+        help=f"where the server listens for camera packets (default 127.0.0.1:{DEFAULT_PORT})",
+    )
+    parser.add_argument(
+        "--camera",
+        type=_camera_id,
+        required=True,
+        metavar="ID",
+        help="this camera's id, 0..65535: the ID-th camera table of the calibration file "
+        "(0 = the first)",
+    )
+    parser.add_argument(
+        "--calib", required=True, metavar="FILE", help="calibration file of the capture stage"
+    )
+    source = parser.add_argument_group("source (exactly one)")
+    source.add_argument("--video", metavar="FILE", help="a video file")
+    source.add_argument(
+        "--images", metavar="DIR", help="a folder of images, frames in file-name order"
+    )
+    source.add_argument("--webcam", type=natural, metavar="INDEX", help="an OpenCV camera index")
+    source.add_argument(
+        "--synthetic",
+        choices=MOTIONS,
+        metavar="MOTION",
+        help="this camera of the synthetic rig filming a built-in motion after a 1-s "
+        f"standing lead-in: {', '.join(MOTIONS)}",
+    )
+    parser.add_argument(
+        "--session",
+        type=_session,
+        default="",
+        metavar="NAME",
+        help="session id put in every packet: up to 16 of [A-Za-z0-9._-] (default none)",
+    )
+    parser.add_argument(
+        "--key-file",
+        metavar="FILE",
+        help=f"shared secret (the file's raw bytes, at least {MIN_KEY_BYTES}) to sign "
+        "packets with (HMAC); the server must use the same file",
+    )
+    timing = parser.add_argument_group("timing")
+    timing.add_argument(
+        "--fps",
+        type=positive_float,
+        metavar="N",
+        help=f"frame rate (default: a video's own, {DEFAULT_FPS:g} for images and the "
+        "synthetic rig, the webcam's own; asked of a webcam)",
+    )
+    timing.add_argument(
+        "--no-pace",
+        action="store_true",
+        default=None,
+        help="files and the synthetic rig: go as fast as possible instead of in real time",
+    )
+    timing.add_argument(
+        "--loop",
+        action="store_true",
+        default=None,
+        help="files and the synthetic rig: play again and again (the subject starts in "
+        "the standard pose each time)",
+    )
+    timing.add_argument(
+        "--start-sequence",
+        type=_sequence,
+        default=0,
+        metavar="N",
+        help="sequence number of the first packet (default 0; wraps after 2^32 - 1)",
+    )
+    synthetic = parser.add_argument_group("synthetic rig")
+    synthetic.add_argument(
+        "--seconds",
+        type=positive_float,
+        metavar="S",
+        help=f"length of the motion (default {DEFAULT_SYNTHETIC_SECONDS:g})",
+    )
+    synthetic.add_argument(
+        "--seed", type=natural, metavar="N", help="seed of the motion and noise (default 0)"
+    )
+    synthetic.add_argument(
+        "--start-at",
+        type=_finite,
+        metavar="T",
+        help="UNIX time of frame 0; frame i is captured at T + i / fps (default: now + "
+        f"{START_DELAY_SECONDS:g} s). Nodes given the same motion, seed and T film the "
+        "same instants",
+    )
+    subject = parser.add_argument_group(
+        "subject start (video, images, webcam): where the subject stands in the standard "
+        "pose when capture begins"
+    )
+    subject.add_argument("--start-x", type=_finite, metavar="M", help="hip midpoint x, m (0)")
+    subject.add_argument("--start-z", type=_finite, metavar="M", help="hip midpoint z, m (0)")
+    subject.add_argument(
+        "--heading", type=_finite, metavar="DEG", help="facing +Z turned towards +X, degrees (0)"
+    )
+    subject.add_argument("--height", type=positive_float, metavar="M", help="stature, m (1.70)")
+    parser.add_argument(
+        "--threshold",
+        type=positive_float,
+        metavar="LEVEL",
+        help="fixed marker threshold, grey level (default: automatic per frame)",
+    )
+    parser.add_argument(
+        "--verbose",
+        action="store_true",
+        help="print a status line to stderr every few seconds",
+    )
+    parser.set_defaults(run=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    source = _source_of(args)
+    cameras = read_calibration(args.calib)
+    if args.camera >= len(cameras):
+        raise InputError(
+            args.calib,
+            f"has {len(cameras)} cameras (ids 0..{len(cameras) - 1}); no camera {args.camera}",
+        )
+    camera = cameras[args.camera]
+    key = read_key_file(args.key_file) if args.key_file is not None else None
+    host, port = args.server
+    with PacketSender(host, port, args.camera, args.session, key) as sender:
+        node, captures = _open_source(args, source, camera)
+        with contextlib.closing(captures):
+            summary = run_node(
+                node,
+                captures,
+                sender,
+                args.start_sequence,
+                status=sys.stderr if args.verbose else None,
+            )
+    print(summary.describe())
+    return 0
+
+
+def _source_of(args: argparse.Namespace) -> str:
+    """The one source flag given; InputError for none, several, or a flag of another source."""
+    given = [name for name in SOURCES if getattr(args, name) is not None]
+    if not given:
+        raise InputError("source", "none given: use --video, --images, --webcam or --synthetic")
+    if len(given) > 1:
+        raise InputError(" and ".join(f"--{name}" for name in given), "give only one source")
+    source = given[0]
+    for name, sources in _SCOPES.items():
+        if getattr(args, name) is not None and source not in sources:
+            flag = "--" + name.replace("_", "-")
+            raise InputError(flag, f"does not apply to --{source}")
+    return source
+
+
+def _open_source(
+    args: argparse.Namespace, source: str, camera: Camera
+) -> tuple[CameraNode, Iterator[Capture]]:
+    """The camera node and the capture feed of the chosen source, opened."""
+    threshold = args.threshold if args.threshold is not None else "auto"
+    pace, loop = not args.no_pace, bool(args.loop)
+    if source == "synthetic":
+        fps = args.fps or DEFAULT_FPS
+        seconds = args.seconds or DEFAULT_SYNTHETIC_SECONDS
+        seed = args.seed or 0
+        try:
+            lead_in = synthetic_lead_in(args.synthetic, seconds, fps, seed)
+        except ValueError as exc:
+            raise InputError("--seconds", str(exc)) from None
+        start_at = args.start_at
+        if start_at is None:
+            start_at = time.time() + START_DELAY_SECONDS
+        feed = SyntheticFeed(camera, args.camera, lead_in, fps, seed, start_at, pace, loop)
+        return CameraNode(camera, SubjectStart.of(lead_in), feed.mask, threshold), feed.captures()
+    start = SubjectStart(
+        args.start_x or 0.0,
+        args.start_z or 0.0,
+        args.heading or 0.0,
+        args.height or SubjectStart.height,
+    )
+    node = CameraNode(camera, start, threshold=threshold)
+    if source == "webcam":
+        return node, WebcamFeed(args.webcam, args.fps).captures()
+    frames = open_frames(args.video if source == "video" else args.images)
+    if source == "video" and not frames.is_video:
+        raise InputError(args.video, "is a folder: use --images")
+    if source == "images" and frames.is_video:
+        raise InputError(args.images, "is a file: use --video")
+    return node, FileFeed(frames, args.fps, pace, loop).captures()
+
+
+def _camera_id(text: str) -> int:
+    """A camera id 0..65535 from a command-line word."""
+    value = natural(text)
+    if value > 0xFFFF:
+        raise argparse.ArgumentTypeError(f"must be 0..65535, got {value}")
+    return value
+
+
+def _sequence(text: str) -> int:
+    """A packet sequence number 0..2^32 - 1 from a command-line word."""
+    value = natural(text)
+    if value >= 2**32:
+        raise argparse.ArgumentTypeError(f"must be 0..{2**32 - 1}, got {value}")
+    return value
+
+
+def _session(text: str) -> str:
+    """A packet session id from a command-line word (checked as `MarkerPacket` does)."""
+    try:
+        MarkerPacket(0, 0, 0.0, np.full((N_MARKERS, 2), np.nan), text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def _finite(text: str) -> float:
+    """A finite number from a command-line word."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text}")
+    return value

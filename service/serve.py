@@ -1,0 +1,186 @@
+"""`LiveServer`: `samba serve` as one asyncio object — sessions, UDP input, timer, HTTP.
+
+The camera datagrams are read and processed in the event loop (`service.udp_input`,
+`service.server`); a single timer resolves frames whose wait for late cameras ran out.
+The HTTP side (aiohttp) serves the control API (`service.control_api`) and the live
+viewer (`service.viewer`) on one port. The API is bound to 127.0.0.1 by default;
+binding it to any other address requires a token.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import time
+from collections.abc import Iterable
+from pathlib import Path
+from types import TracebackType
+
+from aiohttp import web
+
+from service.control_api import add_control_routes, token_middleware
+from service.errors import ServiceError
+from service.server import CaptureServer
+from service.session_config import SessionConfig
+from service.udp_input import UdpInput
+from service.viewer import ViewerHub, add_viewer_routes
+
+UDP_PORT = 9870
+"""Default UDP port camera nodes send to."""
+HTTP_PORT = 8080
+"""Default port of the control API and the viewer."""
+TIMER_SLACK_S = 0.0005
+"""The frame timer fires this long after a deadline, so that a frame is surely due."""
+FLUSH_INTERVAL_S = 1.0
+"""How often recording takes are flushed to the operating system, seconds."""
+
+
+def is_loopback(host: str) -> bool:
+    """True for localhost and loopback addresses (127.0.0.0/8, ::1)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+class LiveServer:
+    """A capture server with its sockets; use `async with LiveServer(...) as server:`.
+
+    `udp` and `http` are (host, port) to bind (port 0: any free port; `http=None`: no
+    HTTP side). `token` protects the HTTP side and is required unless `http` is a
+    loopback address; `key` is the camera nodes' shared HMAC key. `ServiceError` for a
+    missing token; session files are opened by `start`.
+    """
+
+    def __init__(
+        self,
+        configs: Iterable[SessionConfig],
+        takes_dir: str | Path,
+        *,
+        udp: tuple[str, int] = ("127.0.0.1", UDP_PORT),
+        http: tuple[str, int] | None = ("127.0.0.1", HTTP_PORT),
+        token: str | None = None,
+        key: bytes | None = None,
+    ) -> None:
+        if http is not None and token is None and not is_loopback(http[0]):
+            raise ServiceError(
+                f"{http[0]}:{http[1]}",
+                "the control API is bound beyond this machine: give a token (--token or "
+                "$SAMBA_TOKEN), or bind it to 127.0.0.1",
+            )
+        self._configs = list(configs)
+        self._takes_dir = Path(takes_dir)
+        self._udp_bind = udp
+        self._http_bind = http
+        self._token = token
+        self._key = key
+        self.hub = ViewerHub()
+        self.server: CaptureServer | None = None
+        self._udp: UdpInput | None = None
+        self._runner: web.AppRunner | None = None
+        self._timer: asyncio.TimerHandle | None = None
+        self._timer_due = float("inf")
+        self._flusher: asyncio.Task[None] | None = None
+        self.http_address: tuple[str, int] | None = None
+
+    async def start(self) -> None:
+        """Open the sessions (in a worker thread) and the sockets, and start serving."""
+        self.server = await asyncio.to_thread(
+            CaptureServer, self._configs, self._takes_dir, self._key, self.hub.publish
+        )
+        try:
+            self._udp = UdpInput(*self._udp_bind, self._on_datagram)
+            self._udp.start()
+            self._flusher = asyncio.create_task(self._flush_takes())
+            if self._http_bind is not None:
+                await self._start_http(*self._http_bind)
+        except BaseException:
+            await self.stop()
+            raise
+
+    async def _start_http(self, host: str, port: int) -> None:
+        middlewares = [token_middleware(self._token)] if self._token else []
+        app = web.Application(middlewares=middlewares)
+        add_viewer_routes(app, self.hub)
+        assert self.server is not None
+        add_control_routes(app, self.server)
+        self._runner = web.AppRunner(app, access_log=None)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, host, port)
+        await site.start()
+        bound = self._runner.addresses[0]
+        self.http_address = (bound[0], bound[1])
+
+    @property
+    def udp_address(self) -> tuple[str, int]:
+        """The (host, port) camera nodes send to."""
+        if self._udp is None:
+            raise RuntimeError("the server is not started")
+        return self._udp.address
+
+    @property
+    def http_url(self) -> str | None:
+        """The base URL of the control API and viewer, None without an HTTP side."""
+        if self.http_address is None:
+            return None
+        return f"http://{self.http_address[0]}:{self.http_address[1]}"
+
+    async def stop(self) -> None:
+        """Stop reading, close the viewer sockets and HTTP side, finish recording takes."""
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+        if self._flusher is not None:
+            self._flusher.cancel()
+            self._flusher = None
+        if self._udp is not None:
+            self._udp.close()
+            self._udp = None
+        await self.hub.close()
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
+        if self.server is not None:
+            self.server.close()
+
+    async def __aenter__(self) -> LiveServer:
+        await self.start()
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        await self.stop()
+
+    async def _flush_takes(self) -> None:
+        while self.server is not None:
+            await asyncio.sleep(FLUSH_INTERVAL_S)
+            for session in list(self.server.sessions.values()):
+                session.flush_take()
+
+    def _on_datagram(self, data: bytes, arrival: float, sender: str) -> None:
+        assert self.server is not None
+        self.server.receive(data, arrival, sender)
+        self._schedule()
+
+    def _schedule(self) -> None:
+        assert self.server is not None
+        deadline = self.server.deadline()
+        if deadline is None or deadline >= self._timer_due:
+            return
+        if self._timer is not None:
+            self._timer.cancel()
+        delay = max(0.0, deadline + TIMER_SLACK_S - time.time())
+        self._timer = asyncio.get_running_loop().call_later(delay, self._on_timer)
+        self._timer_due = deadline
+
+    def _on_timer(self) -> None:
+        self._timer, self._timer_due = None, float("inf")
+        if self.server is not None:
+            self.server.tick(time.time())
+            self._schedule()

@@ -1,0 +1,167 @@
+"""`samba serve`: run the live capture server until Ctrl-C (or `--duration`)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import os
+import signal
+import sys
+from pathlib import Path
+
+from samba.cli_arguments import address, bind_address, positive_float
+from samba.methods import METHODS
+from service.errors import ServiceError
+from service.packet import read_key_file
+from service.serve import HTTP_PORT, UDP_PORT, LiveServer
+from service.session import CaptureSession
+from service.session_config import SessionConfig, read_sessions
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    """Add the `serve` arguments to `parser`."""
+    parser.description = (
+        "Receive camera-node packets, reconstruct each session's skeleton, stream it as VMC "
+        "to game engines and to the live viewer, and record takes on request."
+    )
+    one = parser.add_argument_group("one session from flags (or use --config)")
+    one.add_argument("--config", help="TOML file of [[session]] tables (see README)")
+    one.add_argument("--calib", help="camera calibration TOML; camera id n = n-th camera")
+    one.add_argument("--db", help="pose store directory")
+    one.add_argument("--session", default="default", help="session name (default: default)")
+    one.add_argument("--method", default="samba", choices=sorted(METHODS))
+    one.add_argument("--fps", type=positive_float, default=60.0, help="camera frame rate")
+    one.add_argument(
+        "--vmc",
+        type=address,
+        action="append",
+        default=[],
+        metavar="HOST:PORT",
+        help="send VMC to this receiver (repeatable), e.g. 127.0.0.1:39539",
+    )
+    one.add_argument("--avatar", help="avatar file (.vrm, .glb) whose rig the VMC stream uses")
+    one.add_argument("--wait-ms", type=float, default=50.0, help="wait for late cameras (ms)")
+    net = parser.add_argument_group("network")
+    net.add_argument(
+        "--udp",
+        type=bind_address,
+        default=("127.0.0.1", UDP_PORT),
+        metavar="HOST:PORT",
+        help=f"where camera nodes send (default 127.0.0.1:{UDP_PORT}; 0.0.0.0 for other hosts)",
+    )
+    net.add_argument(
+        "--http",
+        type=bind_address,
+        default=("127.0.0.1", HTTP_PORT),
+        metavar="HOST:PORT",
+        help=f"control API and viewer (default 127.0.0.1:{HTTP_PORT})",
+    )
+    net.add_argument("--no-http", action="store_true", help="no control API or viewer")
+    net.add_argument("--token", help="API token (default $SAMBA_TOKEN); needed beyond loopback")
+    net.add_argument("--key-file", help="shared HMAC key file; packets must then be signed")
+    parser.add_argument("--takes", default="takes", help="folder of recorded takes")
+    parser.add_argument(
+        "--record",
+        nargs="?",
+        const="",
+        metavar="NAME",
+        help="record a take in every session from the start (optional take name)",
+    )
+    parser.add_argument(
+        "--duration", type=positive_float, help="stop after this many seconds (default: Ctrl-C)"
+    )
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Start the server, print where it listens, serve, print a summary at the end."""
+    configs = _configs(args)
+    key = read_key_file(args.key_file) if args.key_file else None
+    server = LiveServer(
+        configs,
+        args.takes,
+        udp=args.udp,
+        http=None if args.no_http else args.http,
+        token=args.token or os.environ.get("SAMBA_TOKEN") or None,
+        key=key,
+    )
+    asyncio.run(_serve(server, args.record, args.duration))
+    return 0
+
+
+def _configs(args: argparse.Namespace) -> list[SessionConfig]:
+    if args.config:
+        if args.calib or args.db:
+            raise ServiceError("--config", "give either --config or --calib/--db, not both")
+        return read_sessions(args.config)
+    if not (args.calib and args.db):
+        raise ServiceError("samba serve", "give --config FILE, or --calib FILE and --db STORE")
+    values = {
+        "name": args.session,
+        "calibration": args.calib,
+        "database": args.db,
+        "method": args.method,
+        "fps": args.fps,
+        "vmc": [f"{host}:{port}" for host, port in args.vmc],
+        "wait_ms": args.wait_ms,
+    }
+    if args.avatar:
+        values["avatar"] = args.avatar
+    return [SessionConfig.from_mapping(values, "--session")]
+
+
+async def _serve(server: LiveServer, record: str | None, duration: float | None) -> None:
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    async with server:
+        assert server.server is not None
+        sessions = list(server.server.sessions.values())
+        if record is not None:
+            for session in sessions:
+                session.start_take(record or None)
+        _print_start(server, sessions)
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), duration)
+        takes = [t for s in sessions for t in s.takes()]
+        metrics = server.server.metrics()
+    _print_summary(metrics, takes)
+
+
+def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:
+    host, port = server.udp_address
+    print(f"samba serve: camera packets on udp {host}:{port}")
+    for s in sessions:
+        c = s.config
+        vmc = ", ".join(f"{h}:{p}" for h, p in c.vmc) or "none"
+        print(
+            f"  session {s.name}: {len(s.cameras)} cameras ({c.calibration}), database "
+            f"{c.database} ({len(s.reconstructor.source.poses)} poses), method {c.method}, "
+            f"{c.fps:g} fps, VMC -> {vmc}"
+        )
+        if server.http_url:
+            print(f"    viewer: {server.http_url}/viewer/{s.name}")
+        take = s.takes()[-1] if s.takes() else None
+        if take is not None and take.recording:
+            print(f"    recording take {take.name} -> {take.path}")
+    if server.http_url:
+        print(f"  control API: {server.http_url}/api/health (Ctrl-C stops)")
+    sys.stdout.flush()
+
+
+def _print_summary(metrics: dict, takes: list) -> None:
+    print(
+        f"samba serve: stopped; {metrics['datagrams']} datagrams in, "
+        f"{metrics['dropped']['total']} dropped"
+    )
+    for name, m in metrics["sessions"].items():
+        sync, latency = m["sync"], m["latency"]
+        print(
+            f"  session {name}: {m['frames_out']} frames out ({sync['complete']} complete, "
+            f"{sync['partial']} partial, {sync['skipped']} skipped: too few cameras); latency "
+            f"p50 {latency['p50_ms']} ms, p99 {latency['p99_ms']} ms"
+        )
+    for take in takes:
+        print(f"  take {take.name}: {take.frames} frames -> {Path(take.path)}")

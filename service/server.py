@@ -1,0 +1,130 @@
+"""`CaptureServer`: the capture sessions of one server and the routing of datagrams to them.
+
+No sockets here (`service.udp_input` reads them, `service.serve` runs everything):
+`receive` takes one datagram with the wall-clock time it arrived, decodes it
+(`service.packet.decode`, with the shared key when one is set) and hands the packet to
+the session its session id names — or, when the id is empty, to the only session. A
+datagram that is dropped is counted by reason: a `PacketError` reason, or
+"unknown session". Nothing a sender does raises out of `receive`.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from service.errors import PacketError, ServiceError
+from service.packet import decode
+from service.session import CaptureSession, FrameResult, Publish
+from service.session_config import SessionConfig
+
+UNKNOWN_SESSION = "unknown session"
+"""Drop reason of a valid packet whose session id names no session."""
+
+
+class CaptureServer:
+    """The sessions of a server; see the module docstring.
+
+    `takes_dir`: folder of recorded takes (a sub-folder per session). `key`: the shared
+    secret camera nodes sign packets with (None: packets must be unsigned).
+    `publish`: where sessions send viewer frames.
+    """
+
+    def __init__(
+        self,
+        configs: Iterable[SessionConfig],
+        takes_dir: str | Path,
+        key: bytes | None = None,
+        publish: Publish | None = None,
+    ) -> None:
+        self.takes_dir = Path(takes_dir)
+        self.key = key
+        self._publish = publish
+        self.sessions: dict[str, CaptureSession] = {}
+        self.datagrams = 0
+        self.drops: Counter[str] = Counter()
+        try:
+            for config in configs:
+                self.add_session(config)
+        except BaseException:
+            self.close()
+            raise
+
+    def add_session(self, config: SessionConfig) -> CaptureSession:
+        """Open a session and start routing packets to it (`open_session`, `attach`)."""
+        return self.attach(self.open_session(config))
+
+    def open_session(self, config: SessionConfig) -> CaptureSession:
+        """A new session of this server, not yet receiving packets. It only reads files,
+        so a caller may run it in a worker thread (loading a large database takes a
+        while). `ServiceError` if the name is taken, or as `CaptureSession` raises."""
+        self._check_free(config.name)
+        return CaptureSession(config, self.takes_dir / config.name, self._publish)
+
+    def attach(self, session: CaptureSession) -> CaptureSession:
+        """Start routing packets to an opened session; `ServiceError` (and the session is
+        closed) if a session of its name appeared meanwhile."""
+        try:
+            self._check_free(session.name)
+        except ServiceError:
+            session.close()
+            raise
+        self.sessions[session.name] = session
+        return session
+
+    def _check_free(self, name: str) -> None:
+        if name in self.sessions:
+            raise ServiceError(name, "a session of this name is already running")
+
+    def remove_session(self, name: str) -> None:
+        """Stop a session (closing its take); `ServiceError` if there is none."""
+        self.session(name).close()
+        del self.sessions[name]
+
+    def session(self, name: str) -> CaptureSession:
+        """The session called `name`; `ServiceError` if there is none."""
+        try:
+            return self.sessions[name]
+        except KeyError:
+            raise ServiceError(name, "no such session") from None
+
+    def receive(self, data: bytes, arrival: float, sender: str = "packet") -> list[FrameResult]:
+        """Handle one datagram from `sender` that arrived at `arrival` (s, wall clock);
+        returns the frames it let the sessions process."""
+        self.datagrams += 1
+        try:
+            packet = decode(data, self.key, source=sender)
+        except PacketError as exc:
+            self.drops[exc.reason] += 1
+            return []
+        session = self.sessions.get(packet.session)
+        if session is None and packet.session == "" and len(self.sessions) == 1:
+            session = next(iter(self.sessions.values()))
+        if session is None:
+            self.drops[UNKNOWN_SESSION] += 1
+            return []
+        return session.on_packet(packet, arrival)
+
+    def tick(self, now: float) -> list[FrameResult]:
+        """Process every session's frames whose wait ran out at `now` (s)."""
+        return [r for s in list(self.sessions.values()) for r in s.on_timer(now)]
+
+    def deadline(self) -> float | None:
+        """The earliest time (s) `tick` has work, None if no frame waits."""
+        deadlines = [d for s in self.sessions.values() if (d := s.deadline()) is not None]
+        return min(deadlines, default=None)
+
+    def metrics(self) -> dict[str, Any]:
+        """A JSON-ready snapshot: datagrams in, drops by reason, and per-session metrics."""
+        return {
+            "datagrams": self.datagrams,
+            "dropped": {"total": self.drops.total(), **dict(sorted(self.drops.items()))},
+            "sessions": {name: s.metrics() for name, s in self.sessions.items()},
+        }
+
+    def close(self) -> None:
+        """Close every session (recording takes are finished, not lost)."""
+        for session in self.sessions.values():
+            session.close()

@@ -1,0 +1,269 @@
+"""`CaptureSession`: one subject's live capture, from camera packets to avatar poses.
+
+Per frame assembled by `FrameSync` (one packet per camera, or at least `min_cameras`
+after waiting `wait_ms`): undistort the cameras' labelled pixels, triangulate the 8
+markers (DLT with outlier gating), reconstruct the 13 joints with the session's pose
+database and method (`samba.reconstruction.Reconstructor.step`, the same code as the
+offline reconstruction), retarget them to the avatar (`export.live_retarget`), and send
+the result to every output: VMC bundles to the game engines, a frame to the viewer, a
+frame to the take being recorded.
+
+Times are wall-clock seconds (`time.time()`, the clock the server stamps arriving
+datagrams with); the latency of a frame runs from the arrival of its last packet to
+the moment its VMC bundles have been handed to the network.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from db.index import PoseIndex
+from db.store import PoseStore
+from export.avatar_file import read_avatar_rig
+from export.humanoid import HumanoidRig
+from export.live_retarget import LiveRetarget
+from samba.calibration_file import read_calibration
+from samba.methods import method
+from samba.reconstruction import PoseEstimate
+from samba.skeleton import N_MARKERS, mirror_poses
+from samba.triangulation import Triangulation
+from service.errors import ServiceError
+from service.frame_sync import FrameSync, SyncedFrame
+from service.metrics import LatencyWindow
+from service.packet import MarkerPacket
+from service.session_config import SessionConfig
+from service.take_recorder import TakeRecorder
+from service.viewer import frame_message
+from service.vmc import VmcSender, frame_bundles, unity_values
+
+TAKE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+"""A take name given to `start_take`: it becomes the file name `<name>.mcap`."""
+
+Publish = Callable[[str, dict[str, Any]], None]
+"""Where viewer frames go: `publish(session_name, message)`."""
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """One processed frame: `time` capture time (s, server clock), `markers` (8, 3)
+    triangulated meters (NaN = missing), the reconstruction `estimate`, the `cameras`
+    that contributed and the `latency` in seconds."""
+
+    time: float
+    markers: np.ndarray
+    estimate: PoseEstimate
+    cameras: tuple[int, ...]
+    latency: float
+
+
+@dataclass(frozen=True)
+class TakeInfo:
+    """A take of this session: its `path`, `name`, `frames` written and whether it is
+    still `recording`."""
+
+    path: Path
+    name: str
+    frames: int
+    recording: bool
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict of this take."""
+        return {
+            "name": self.name,
+            "path": str(self.path),
+            "frames": self.frames,
+            "recording": self.recording,
+        }
+
+
+class CaptureSession:
+    """A running capture session; see the module docstring.
+
+    Opens the calibration and the pose database (read only: nothing is written to the
+    store) and the VMC socket; raises `ServiceError` / `InputError` naming the file
+    when one cannot be used. `takes_dir` is where `start_take` writes.
+    """
+
+    def __init__(
+        self, config: SessionConfig, takes_dir: str | Path, publish: Publish | None = None
+    ) -> None:
+        self.config = config
+        self.takes_dir = Path(takes_dir)
+        self._publish = publish
+        self.cameras = read_calibration(config.calibration)
+        self._projections = self.cameras.projections
+        chosen = method(config.method)
+        store = PoseStore.open(config.database)
+        index = store.index
+        if chosen.mirrored_database:
+            poses = np.asarray(store.poses)
+            index = PoseIndex.build(
+                np.concatenate([poses, mirror_poses(poses)]), scale_by_tibia=store.scale_by_tibia
+            )
+        self.reconstructor = chosen.build(index)
+        self.rig = (
+            HumanoidRig.from_body() if config.avatar is None else read_avatar_rig(config.avatar)
+        )
+        self.retarget = LiveRetarget(self.rig)
+        self.sync = FrameSync(
+            range(len(self.cameras)),
+            config.fps,
+            wait_s=config.wait_ms / 1e3,
+            min_cameras=min(config.min_cameras, len(self.cameras)),
+        )
+        self.vmc = VmcSender(config.vmc)
+        self.latency = LatencyWindow()
+        self.frames_out = 0
+        self.predicted_frames = 0
+        self.started = time.time()
+        self._recorder: TakeRecorder | None = None
+        self._takes: list[TakeInfo] = []
+
+    @property
+    def name(self) -> str:
+        """The session's name (the packets' session id)."""
+        return self.config.name
+
+    def on_packet(self, packet: MarkerPacket, arrival: float) -> list[FrameResult]:
+        """Take one decoded packet that arrived at `arrival` (s) and process the frames it
+        completes or pushes out."""
+        return [self._process(f) for f in self.sync.add(packet, arrival)]
+
+    def on_timer(self, now: float) -> list[FrameResult]:
+        """Process the frames whose wait for late cameras has run out at `now` (s)."""
+        return [self._process(f) for f in self.sync.expire(now)]
+
+    def deadline(self) -> float | None:
+        """When `on_timer` is next due (s), None if no frame is waiting."""
+        return self.sync.deadline()
+
+    def _process(self, frame: SyncedFrame) -> FrameResult:
+        pixels = np.full((len(self.cameras), N_MARKERS, 2), np.nan)
+        for camera, packet in frame.packets.items():
+            pixels[camera] = packet.markers
+        views = Triangulation.from_views(
+            self._projections,
+            self.cameras.undistort(pixels),
+            gate_px=self.config.gate_px or None,
+        )
+        markers = views.points
+        estimate = self.reconstructor.step(markers)
+        rotations, root = self.retarget.step(estimate.pose)
+        positions, unity_rotations = unity_values(root, rotations, self.rig)
+        self.vmc.send(frame_bundles(positions, unity_rotations, frame.time - self.started))
+        latency = time.time() - frame.last_arrival
+        self.latency.add(latency)
+        self.frames_out += 1
+        self.predicted_frames += estimate.predicted
+        if self._recorder is not None:
+            self._recorder.write_frame(
+                max(0, round(frame.time * 1e9)),
+                estimate,
+                markers,
+                {str(c): p.markers for c, p in frame.packets.items()},
+            )
+        if self._publish is not None:
+            self._publish(
+                self.name,
+                frame_message(
+                    self.name,
+                    self.frames_out,
+                    frame.time,
+                    estimate.pose,
+                    markers,
+                    latency * 1e3,
+                    estimate.confident,
+                    estimate.predicted,
+                ),
+            )
+        return FrameResult(frame.time, markers, estimate, tuple(frame.packets), latency)
+
+    # -- takes ---------------------------------------------------------------------------
+
+    def start_take(self, name: str | None = None) -> TakeInfo:
+        """Start recording to `<takes_dir>/<name>.mcap` (default name: session name and
+        UTC time). `ServiceError` when a take is already recording, the name is not
+        1..64 of `[A-Za-z0-9._-]`, or the file exists."""
+        if self._recorder is not None:
+            raise ServiceError(self.name, f"take {self._recorder.name!r} is already recording")
+        if name is None:
+            name = f"{self.name}_{datetime.now(UTC):%Y%m%d-%H%M%S}"
+        if not TAKE_NAME.fullmatch(name):
+            raise ServiceError(
+                name, "a take name is 1..64 of [A-Za-z0-9._-] starting with a letter or digit"
+            )
+        self.takes_dir.mkdir(parents=True, exist_ok=True)
+        self._recorder = TakeRecorder(self.takes_dir / f"{name}.mcap", self.config.fps, name)
+        return self._take_info(self._recorder, recording=True)
+
+    def stop_take(self) -> TakeInfo:
+        """Stop recording and close the file; `ServiceError` when no take is recording."""
+        if self._recorder is None:
+            raise ServiceError(self.name, "no take is recording")
+        recorder, self._recorder = self._recorder, None
+        recorder.close()
+        info = self._take_info(recorder, recording=False)
+        self._takes.append(info)
+        return info
+
+    def flush_take(self) -> None:
+        """Hand the recording take's buffered frames to the operating system (no-op when
+        nothing records): the server does this every second, so that a crash loses at
+        most the last second even when frames stop coming."""
+        if self._recorder is not None:
+            self._recorder.flush()
+
+    def takes(self) -> list[TakeInfo]:
+        """The takes recorded since the session started, the current one last."""
+        current = [] if self._recorder is None else [self._take_info(self._recorder, True)]
+        return [*self._takes, *current]
+
+    def close(self) -> None:
+        """Stop a recording take (its file stays complete) and close the VMC socket."""
+        if self._recorder is not None:
+            self.stop_take()
+        self.vmc.close()
+
+    @staticmethod
+    def _take_info(recorder: TakeRecorder, recording: bool) -> TakeInfo:
+        return TakeInfo(recorder.path, recorder.name, recorder.frames_written, recording)
+
+    # -- reporting -----------------------------------------------------------------------
+
+    def status(self) -> dict[str, Any]:
+        """A JSON-ready description of the session: config, cameras, state."""
+        c = self.config
+        return {
+            "name": c.name,
+            "cameras": [
+                {"id": i, "name": cam.name, "size": list(cam.size)}
+                for i, cam in enumerate(self.cameras)
+            ],
+            "calibration": str(c.calibration),
+            "database": str(c.database),
+            "method": c.method,
+            "fps": c.fps,
+            "vmc": [f"{host}:{port}" for host, port in c.vmc],
+            "recording": None if self._recorder is None else self._recorder.name,
+            "frames_out": self.frames_out,
+        }
+
+    def metrics(self) -> dict[str, Any]:
+        """A JSON-ready snapshot of the session's counters and latency percentiles."""
+        counts = self.sync.counts
+        return {
+            "frames_out": self.frames_out,
+            "frames_predicted": self.predicted_frames,
+            "sync": dict(vars(counts)),
+            "latency": self.latency.summary(),
+            "vmc_send_errors": sum(self.vmc.errors.values()),
+            "uptime_s": round(time.time() - self.started, 3),
+        }

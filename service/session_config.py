@@ -1,0 +1,162 @@
+"""What a capture session is made of: its cameras, pose database, method and outputs.
+
+A session comes from `samba serve` flags, from a `[[session]]` table of a TOML file
+(`read_sessions`), or from the JSON body of `POST /api/sessions`; the keys are the same:
+
+| key | type | default | meaning |
+|---|---|---|---|
+| `name` | string | (required) | session id: 1..16 of `[A-Za-z0-9._-]`, as camera nodes send it |
+| `calibration` | path | (required) | camera calibration TOML; camera id n = the n-th camera table |
+| `database` | path | (required) | pose store directory (`samba db init` / `import`) |
+| `method` | string | `"samba"` | reconstruction method (`samba eval --methods` names) |
+| `fps` | number | 60 | nominal frame rate of the cameras |
+| `vmc` | list of `"HOST:PORT"` | `[]` | VMC/OSC receivers (VSeeFace, EVMC4U, VMC4UE ...) |
+| `avatar` | path | none | avatar file (.vrm/.glb) whose rig the VMC stream uses |
+| `wait_ms` | number | 50 | how long a frame waits for late cameras |
+| `min_cameras` | integer | 2 | fewest cameras a frame is reconstructed from |
+| `gate_px` | number | 10 | triangulation outlier gate, pixels (0 = none) |
+
+Relative paths in a file are relative to the file's folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from samba.cli_arguments import address
+from samba.methods import METHODS
+from service.errors import ServiceError
+
+SESSION_NAME = re.compile(r"[A-Za-z0-9._-]{1,16}")
+"""A session's name: what camera nodes put in their packets' session field."""
+
+_KEYS = (
+    "name",
+    "calibration",
+    "database",
+    "method",
+    "fps",
+    "vmc",
+    "avatar",
+    "wait_ms",
+    "min_cameras",
+    "gate_px",
+)
+
+
+@dataclass(frozen=True)
+class SessionConfig:
+    """One capture session's settings (see the module docstring for each field)."""
+
+    name: str
+    calibration: Path
+    database: Path
+    method: str = "samba"
+    fps: float = 60.0
+    vmc: tuple[tuple[str, int], ...] = ()
+    avatar: Path | None = None
+    wait_ms: float = 50.0
+    min_cameras: int = 2
+    gate_px: float = 10.0
+
+    @classmethod
+    def from_mapping(
+        cls, values: Mapping[str, Any], source: str, base: Path | None = None
+    ) -> SessionConfig:
+        """A config from a TOML table or JSON object; `ServiceError` naming `source` and
+        the key on an unknown key, a missing one or a bad value. Relative paths are
+        joined to `base` when given."""
+        unknown = sorted(set(values) - set(_KEYS))
+        if unknown:
+            raise ServiceError(source, f"unknown key {unknown[0]!r}; known: {', '.join(_KEYS)}")
+        for key in ("name", "calibration", "database"):
+            if key not in values:
+                raise ServiceError(source, f"missing key {key!r}")
+        name = _string(values, "name", source)
+        if not SESSION_NAME.fullmatch(name):
+            raise ServiceError(source, f"name {name!r} is not 1..16 of [A-Za-z0-9._-]")
+        where = f"{source}: session {name!r}"
+        method = _string(values, "method", where, "samba")
+        if method not in METHODS:
+            raise ServiceError(where, f"unknown method {method!r}; known: {', '.join(METHODS)}")
+        vmc = values.get("vmc", [])
+        if not isinstance(vmc, list) or not all(isinstance(v, str) for v in vmc):
+            raise ServiceError(where, 'vmc must be a list of "HOST:PORT" strings')
+        try:
+            targets = tuple(address(v) for v in vmc)
+        except argparse.ArgumentTypeError as exc:
+            raise ServiceError(where, f"vmc: {exc}") from None
+        avatar = values.get("avatar")
+        return cls(
+            name=name,
+            calibration=_path(values, "calibration", where, base),
+            database=_path(values, "database", where, base),
+            method=method,
+            fps=_number(values, "fps", where, 60.0),
+            vmc=targets,
+            avatar=None if avatar is None else _path(values, "avatar", where, base),
+            wait_ms=_number(values, "wait_ms", where, 50.0, allow_zero=True),
+            min_cameras=int(_number(values, "min_cameras", where, 2, integer=True)),
+            gate_px=_number(values, "gate_px", where, 10.0, allow_zero=True),
+        )
+
+
+def read_sessions(path: str | Path) -> list[SessionConfig]:
+    """The `[[session]]` tables of a TOML file; `ServiceError` naming the file otherwise."""
+    path = Path(path)
+    source = str(path)
+    try:
+        document = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ServiceError(source, f"cannot read: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise ServiceError(source, f"not a TOML file: {exc}") from None
+    extra = sorted(set(document) - {"session"})
+    if extra:
+        raise ServiceError(source, f"unknown top-level key {extra[0]!r}; expected [[session]]")
+    tables = document.get("session")
+    if not isinstance(tables, list) or not tables:
+        raise ServiceError(source, "no [[session]] table")
+    configs = [SessionConfig.from_mapping(t, source, path.parent) for t in tables]
+    names = [c.name for c in configs]
+    for name in names:
+        if names.count(name) > 1:
+            raise ServiceError(source, f"session name {name!r} is used twice")
+    return configs
+
+
+def _string(values: Mapping[str, Any], key: str, where: str, default: str | None = None) -> str:
+    value = values.get(key, default)
+    if not isinstance(value, str):
+        raise ServiceError(where, f"{key} must be a string, got {value!r}")
+    return value
+
+
+def _path(values: Mapping[str, Any], key: str, where: str, base: Path | None) -> Path:
+    path = Path(_string(values, key, where))
+    return base / path if base is not None and not path.is_absolute() else path
+
+
+def _number(
+    values: Mapping[str, Any],
+    key: str,
+    where: str,
+    default: float,
+    *,
+    allow_zero: bool = False,
+    integer: bool = False,
+) -> float:
+    value = values.get(key, default)
+    kind = int if integer else (int, float)
+    if isinstance(value, bool) or not isinstance(value, kind) or not math.isfinite(value):
+        raise ServiceError(where, f"{key} must be a finite {'integer' if integer else 'number'}")
+    if value < 0 or (value == 0 and not allow_zero):
+        raise ServiceError(where, f"{key} must be {'>= 0' if allow_zero else '> 0'}, got {value}")
+    return float(value)

@@ -1,0 +1,124 @@
+"""A synthetic capture as camera nodes would report it, and a player that sends it live.
+
+`SyntheticCapture.film` generates a built-in motion (`samba.synthetic`), places
+cameras around it (`samba.observation.spread_cameras`) and projects the 8 markers into
+every camera with Gaussian pixel noise and random dropout — the labelled pixels a
+camera node's tracker outputs, without rendering images (which `samba node
+--synthetic` does). `play` sends those pixels as UDP packets on a wall-clock grid:
+frame i of every camera is captured at `start_at + i / fps`, as free-running
+synchronised cameras would. The demo, the service tests and the service benchmark use
+them in place of real cameras.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from samba.camera import CameraGroup
+from samba.observation import spread_cameras
+from samba.skeleton import markers_of
+from samba.synthetic import generate
+from samba.take import Take
+from service.packet import MarkerPacket, encode
+
+
+@dataclass(frozen=True, eq=False)
+class SyntheticCapture:
+    """A take seen by calibrated cameras.
+
+    `take` holds the true poses (F, 13, 3) meters at `take.fps`; `cameras` the group
+    (camera id n = `cameras[n]`); `pixels` (c, F, 8, 2) the labelled marker pixels each
+    camera reports, NaN where it misses the marker.
+    """
+
+    take: Take
+    cameras: CameraGroup
+    pixels: np.ndarray
+
+    @classmethod
+    def film(
+        cls,
+        motion: str = "walk",
+        seconds: float = 5.0,
+        fps: float = 60.0,
+        cameras: int = 2,
+        size: tuple[int, int] = (640, 480),
+        noise_px: float = 0.3,
+        dropout: float = 0.0,
+        seed: int = 0,
+    ) -> SyntheticCapture:
+        """Film `seconds` of a built-in `motion` at `fps` with `cameras` cameras of `size`
+        (width, height) pixels; `noise_px` Gaussian pixel noise (standard deviation),
+        each marker view missing with probability `dropout`. Deterministic in `seed`."""
+        take = generate(motion, seconds, fps, seed)
+        group = CameraGroup(tuple(spread_cameras(take.poses, cameras, size)))
+        rng = np.random.default_rng([seed, 1])
+        pixels = group.project(markers_of(take.poses.astype(np.float64)))
+        pixels = pixels + rng.normal(0.0, noise_px, pixels.shape)
+        outside = ~np.stack([c.in_image(p) for c, p in zip(group, pixels, strict=True)])
+        pixels[outside | (rng.random(pixels.shape[:-1]) < dropout)] = np.nan
+        return cls(take, group, pixels)
+
+    @property
+    def frames(self) -> int:
+        """Number of frames F."""
+        return len(self.take)
+
+    def packet(
+        self, camera: int, frame: int, start_at: float, session: str = "", sequence0: int = 0
+    ) -> MarkerPacket:
+        """Camera `camera`'s packet of frame `frame` (sequence `sequence0 + frame`),
+        captured at `start_at + frame / fps` seconds."""
+        return MarkerPacket(
+            camera=camera,
+            sequence=(sequence0 + frame) % 2**32,
+            timestamp=start_at + frame / self.take.fps,
+            markers=self.pixels[camera, frame],
+            session=session,
+        )
+
+
+async def play(
+    capture: SyntheticCapture,
+    address: tuple[str, int],
+    start_at: float,
+    session: str = "",
+    key: bytes | None = None,
+    cameras: Sequence[int] | None = None,
+    frames: range | None = None,
+    sequence0: int = 0,
+    sent: Callable[[int, float], None] | None = None,
+) -> int:
+    """Send `capture` to `address` in real time: every frame's packets (of `cameras`,
+    default all, in camera order) at its capture time `start_at + i / fps` (wall clock,
+    seconds), over `frames` (default all), frame i with sequence `sequence0 + i` (a
+    restarted node: a negative `sequence0` so it counts from 0 again). `sent(frame, t)`
+    is called after a frame's last packet left at wall-clock time t. Returns the number
+    of datagrams sent (a datagram the socket buffer cannot take is not sent).
+    """
+    ids = list(range(len(capture.cameras))) if cameras is None else list(cameras)
+    frames = range(capture.frames) if frames is None else frames
+    count = 0
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.setblocking(False)
+        for frame in frames:
+            due = start_at + frame / capture.take.fps
+            delay = due - time.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            for camera in ids:
+                data = encode(capture.packet(camera, frame, start_at, session, sequence0), key)
+                try:
+                    sock.sendto(data, address)
+                    count += 1
+                except BlockingIOError:
+                    continue
+            if sent is not None:
+                sent(frame, time.time())
+    return count

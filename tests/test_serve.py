@@ -1,0 +1,222 @@
+"""The live server end to end on loopback: synthetic camera packets in over real UDP, VMC
+bundles, the recorded take, the control API and `samba serve` out."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from aiohttp import ClientSession
+from live_fixtures import VmcReceiver, config, offline_poses, until
+
+from ingest.mcap_take import read_take
+from service.packet import encode
+from service.serve import LiveServer
+from service.session_config import read_sessions
+from service.synthetic_capture import SyntheticCapture, play
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_live_path_gives_the_offline_poses_and_streams_every_frame(
+    live_store: Path, live_calibration: Path, live_capture: SyntheticCapture, tmp_path: Path
+) -> None:
+    vmc = VmcReceiver()
+
+    async def run() -> dict:
+        cfg = config(live_calibration, live_store, vmc=[vmc.target], wait_ms=200)
+        async with LiveServer([cfg], tmp_path / "takes", udp=("127.0.0.1", 0), http=None) as live:
+            assert live.server is not None
+            session = live.server.session("stage")
+            session.start_take("walk")
+            vmc.start()
+            await play(live_capture, live.udp_address, time.time() + 0.2, session="stage")
+            await until(lambda: session.frames_out == live_capture.frames)
+            session.stop_take()
+            return live.server.metrics()
+
+    metrics = asyncio.run(run())
+    stage = metrics["sessions"]["stage"]
+    assert stage["frames_out"] == live_capture.frames
+    assert stage["sync"]["complete"] == live_capture.frames and metrics["dropped"]["total"] == 0
+    take = read_take(tmp_path / "takes" / "stage" / "walk.mcap")
+    assert len(take) == live_capture.frames
+    error = np.linalg.norm(take.poses - offline_poses(live_capture, live_store), axis=-1)
+    assert error.max() < 0.001  # meters: the same poses within 1 mm
+    vmc.drain()
+    assert len(vmc.times) == live_capture.frames and np.all(np.diff(vmc.times) > 0)
+    assert stage["latency"]["count"] == live_capture.frames  # speed: bench/bench_service.py
+
+
+def test_signed_packets_and_bad_datagrams(
+    live_store: Path, live_calibration: Path, live_capture: SyntheticCapture, tmp_path: Path
+) -> None:
+    key = bytes(range(32))
+
+    async def run() -> dict:
+        cfg = config(live_calibration, live_store)
+        async with LiveServer([cfg], tmp_path, udp=("127.0.0.1", 0), http=None, key=key) as live:
+            assert live.server is not None
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+                good = live_capture.packet(0, 0, time.time(), "stage")
+                for data in (
+                    b"",
+                    b"x" * 300,
+                    b"GIF89a" + bytes(94),
+                    encode(good),  # unsigned while the server has a key
+                    encode(good, b"wrong key, 32 bytes long........"),
+                    encode(good, key)[:-1] + b"\x00",
+                    encode(live_capture.packet(0, 1, time.time(), "other"), key),
+                    encode(good, key),
+                ):
+                    sock.sendto(data, live.udp_address)
+            await until(lambda: live.server is not None and live.server.datagrams == 8)
+            return live.server.metrics()
+
+    metrics = asyncio.run(run())
+    assert metrics["datagrams"] == 8
+    assert metrics["dropped"] == {
+        "total": 7,
+        "bad magic": 1,
+        "bad tag": 2,
+        "missing tag": 1,
+        "too long": 1,
+        "too short": 1,
+        "unknown session": 1,
+    }
+    assert metrics["sessions"]["stage"]["sync"]["packets"] == 1
+
+
+def test_control_api(live_store: Path, live_calibration: Path, tmp_path: Path) -> None:
+    async def run() -> None:
+        cfg = config(live_calibration, live_store)
+        async with (
+            LiveServer([cfg], tmp_path, udp=("127.0.0.1", 0), http=("127.0.0.1", 0)) as live,
+            ClientSession(str(live.http_url)) as http,
+        ):
+            async with http.get("/api/health") as r:
+                assert r.status == 200 and (await r.json())["sessions"] == 1
+            async with http.get("/api/sessions") as r:
+                (session,) = (await r.json())["sessions"]
+                assert session["name"] == "stage" and len(session["cameras"]) == 2
+            async with http.post("/api/sessions/stage/takes/stop") as r:
+                assert r.status == 409
+            async with http.post("/api/sessions/stage/takes", json={"name": "t1"}) as r:
+                assert r.status == 201 and (await r.json())["take"]["recording"]
+            async with http.post("/api/sessions/stage/takes", json={"name": "t2"}) as r:
+                assert r.status == 409
+            async with http.post("/api/sessions/stage/takes/stop") as r:
+                take = (await r.json())["take"]
+                assert r.status == 200 and take["name"] == "t1" and not take["recording"]
+            async with http.post("/api/sessions/stage/takes", json={"name": "t1"}) as r:
+                assert r.status == 409 and "exists" in (await r.json())["error"]
+            async with http.get("/api/takes") as r:
+                (listed,) = (await r.json())["takes"]
+                assert listed["name"] == "t1" and listed["bytes"] > 0
+            body = {
+                "name": "second",
+                "calibration": str(live_calibration),
+                "database": str(live_store),
+            }
+            async with http.post("/api/sessions", json=body) as r:
+                assert r.status == 201
+            async with http.post("/api/sessions", json=body) as r:
+                assert r.status == 409
+            async with http.post("/api/sessions", json={**body, "name": "x", "fps": -1}) as r:
+                assert r.status == 400 and "fps" in (await r.json())["error"]
+            async with http.post("/api/sessions", data=b"{not json") as r:
+                assert r.status == 400 and "not JSON" in (await r.json())["error"]
+            async with http.get("/api/metrics") as r:
+                metrics = await r.json()
+                assert set(metrics["sessions"]) == {"stage", "second"}
+                assert "p99_ms" in metrics["sessions"]["stage"]["latency"]
+            async with http.delete("/api/sessions/second") as r:
+                assert r.status == 200
+            async with http.get("/api/sessions/second") as r:
+                assert r.status == 404
+
+    asyncio.run(run())
+
+
+def test_a_token_guards_the_api(live_store: Path, live_calibration: Path, tmp_path: Path) -> None:
+    async def run() -> None:
+        cfg = config(live_calibration, live_store)
+        async with (
+            LiveServer(
+                [cfg], tmp_path, udp=("127.0.0.1", 0), http=("127.0.0.1", 0), token="s3cret"
+            ) as live,
+            ClientSession(str(live.http_url)) as http,
+        ):
+            async with http.get("/api/health") as r:
+                assert r.status == 401
+            headers = {"Authorization": "Bearer s3cret"}
+            async with http.get("/api/health", headers=headers) as r:
+                assert r.status == 200
+            async with http.get("/api/health?token=s3cret") as r:
+                assert r.status == 200
+
+    asyncio.run(run())
+
+
+def test_the_api_is_not_exposed_without_a_token(live_store: Path, live_calibration: Path) -> None:
+    with pytest.raises(Exception, match="token"):
+        LiveServer([config(live_calibration, live_store)], "takes", http=("0.0.0.0", 8080))
+
+
+def test_samba_serve_command(live_store: Path, live_calibration: Path, tmp_path: Path) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    argv = [sys.executable, "-m", "samba.cli", "serve", "--calib", str(live_calibration)]
+    argv += ["--db", str(live_store), "--udp", f"127.0.0.1:{port}", "--no-http"]
+    argv += ["--takes", str(tmp_path / "takes"), "--record", "first", "--duration", "2"]
+    done = subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert f"camera packets on udp 127.0.0.1:{port}" in done.stdout
+    assert "take first: 0 frames" in done.stdout
+    assert (tmp_path / "takes" / "default" / "first.mcap").is_file()
+    bad = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "samba.cli",
+            "serve",
+            "--calib",
+            str(tmp_path / "nope.toml"),
+            "--db",
+            str(live_store),
+            "--no-http",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
+    assert bad.returncode == 1 and "nope.toml" in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1
+
+
+def test_sessions_from_a_config_file(
+    live_store: Path, live_calibration: Path, tmp_path: Path
+) -> None:
+    path = tmp_path / "serve.toml"
+    path.write_text(
+        f'[[session]]\nname = "a"\ncalibration = "{live_calibration}"\ndatabase = "{live_store}"\n'
+        f'vmc = ["127.0.0.1:39539"]\n\n[[session]]\nname = "b"\ncalibration = "c.toml"\n'
+        f'database = "db"\nmethod = "best"\nfps = 30\n'
+    )
+    a, b = read_sessions(path)
+    assert a.vmc == (("127.0.0.1", 39539),) and b.calibration == tmp_path / "c.toml"
+    assert (b.method, b.fps) == ("best", 30.0)
+    path.write_text('[[session]]\nname = "a b"\ncalibration = "c"\ndatabase = "d"\n')
+    with pytest.raises(Exception, match=r"serve.toml.*name 'a b'"):
+        read_sessions(path)
+    path.write_text('[[session]]\nname = "a"\ncalibration = "c"\ndatabase = "d"\nfsp = 3\n')
+    with pytest.raises(Exception, match="unknown key 'fsp'"):
+        read_sessions(path)
