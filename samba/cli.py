@@ -22,7 +22,7 @@ AREAS: dict[str, tuple[str, str]] = {
     "calibrate": ("samba.calibrate_cli", "calibrate cameras from images or videos of a board"),
     "export": ("export.cli", "retarget takes to a humanoid avatar and write USD, glTF or BVH"),
     "serve": ("service.serve_cli", "live capture server: packets in; VMC, viewer, takes out"),
-    "demo": ("db.demo", "build a database from built-in synthetic motions and query it"),
+    "demo": ("service.demo", "a live capture end to end: server, two camera nodes, take, export"),
     "node": ("service.node_cli", "camera node: track the 8 markers in frames and send them by UDP"),
 }
 """Subcommand -> (module with `register(parser)`, one-line help)."""

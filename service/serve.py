@@ -88,7 +88,7 @@ class LiveServer:
     async def start(self) -> None:
         """Open the sessions (in a worker thread) and the sockets, and start serving."""
         self.server = await asyncio.to_thread(
-            CaptureServer, self._configs, self._takes_dir, self._key, self.hub.publish
+            CaptureServer, self._configs, self._takes_dir, self._key, self.hub
         )
         try:
             self._udp = UdpInput(*self._udp_bind, self._on_datagram)

@@ -10,6 +10,8 @@ import signal
 import sys
 from pathlib import Path
 
+from threadpoolctl import threadpool_limits
+
 from samba.cli_arguments import address, bind_address, positive_float
 from samba.methods import METHODS
 from service.errors import ServiceError
@@ -86,7 +88,10 @@ def run(args: argparse.Namespace) -> int:
         token=args.token or os.environ.get("SAMBA_TOKEN") or None,
         key=key,
     )
-    asyncio.run(_serve(server, args.record, args.duration))
+    # Per-frame linear algebra is on 39 x 39 matrices: BLAS threads only contend with
+    # the event loop (and each other) for the cores.
+    with threadpool_limits(1):
+        asyncio.run(_serve(server, args.record, args.duration))
     return 0
 
 

@@ -17,8 +17,9 @@ from typing import Any
 
 from service.errors import PacketError, ServiceError
 from service.packet import decode
-from service.session import CaptureSession, FrameResult, Publish
+from service.session import CaptureSession, FrameResult
 from service.session_config import SessionConfig
+from service.viewer import ViewerHub
 
 UNKNOWN_SESSION = "unknown session"
 """Drop reason of a valid packet whose session id names no session."""
@@ -29,7 +30,7 @@ class CaptureServer:
 
     `takes_dir`: folder of recorded takes (a sub-folder per session). `key`: the shared
     secret camera nodes sign packets with (None: packets must be unsigned).
-    `publish`: where sessions send viewer frames.
+    `viewer`: where sessions send frames for the live viewer.
     """
 
     def __init__(
@@ -37,11 +38,11 @@ class CaptureServer:
         configs: Iterable[SessionConfig],
         takes_dir: str | Path,
         key: bytes | None = None,
-        publish: Publish | None = None,
+        viewer: ViewerHub | None = None,
     ) -> None:
         self.takes_dir = Path(takes_dir)
         self.key = key
-        self._publish = publish
+        self._viewer = viewer
         self.sessions: dict[str, CaptureSession] = {}
         self.datagrams = 0
         self.drops: Counter[str] = Counter()
@@ -61,7 +62,7 @@ class CaptureServer:
         so a caller may run it in a worker thread (loading a large database takes a
         while). `ServiceError` if the name is taken, or as `CaptureSession` raises."""
         self._check_free(config.name)
-        return CaptureSession(config, self.takes_dir / config.name, self._publish)
+        return CaptureSession(config, self.takes_dir / config.name, self._viewer)
 
     def attach(self, session: CaptureSession) -> CaptureSession:
         """Start routing packets to an opened session; `ServiceError` (and the session is

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import re
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -41,14 +40,11 @@ from service.metrics import LatencyWindow
 from service.packet import MarkerPacket
 from service.session_config import SessionConfig
 from service.take_recorder import TakeRecorder
-from service.viewer import frame_message
+from service.viewer import ViewerHub, frame_message
 from service.vmc import VmcSender, frame_bundles, unity_values
 
 TAKE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 """A take name given to `start_take`: it becomes the file name `<name>.mcap`."""
-
-Publish = Callable[[str, dict[str, Any]], None]
-"""Where viewer frames go: `publish(session_name, message)`."""
 
 
 @dataclass(frozen=True)
@@ -89,15 +85,16 @@ class CaptureSession:
 
     Opens the calibration and the pose database (read only: nothing is written to the
     store) and the VMC socket; raises `ServiceError` / `InputError` naming the file
-    when one cannot be used. `takes_dir` is where `start_take` writes.
+    when one cannot be used. `takes_dir` is where `start_take` writes; frames go to
+    `viewer` while the session has viewer clients.
     """
 
     def __init__(
-        self, config: SessionConfig, takes_dir: str | Path, publish: Publish | None = None
+        self, config: SessionConfig, takes_dir: str | Path, viewer: ViewerHub | None = None
     ) -> None:
         self.config = config
         self.takes_dir = Path(takes_dir)
-        self._publish = publish
+        self._viewer = viewer
         self.cameras = read_calibration(config.calibration)
         self._projections = self.cameras.projections
         chosen = method(config.method)
@@ -170,8 +167,8 @@ class CaptureSession:
                 markers,
                 {str(c): p.markers for c, p in frame.packets.items()},
             )
-        if self._publish is not None:
-            self._publish(
+        if self._viewer is not None and self._viewer.clients(self.name):
+            self._viewer.publish(
                 self.name,
                 frame_message(
                     self.name,

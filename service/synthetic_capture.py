@@ -56,7 +56,21 @@ class SyntheticCapture:
         """Film `seconds` of a built-in `motion` at `fps` with `cameras` cameras of `size`
         (width, height) pixels; `noise_px` Gaussian pixel noise (standard deviation),
         each marker view missing with probability `dropout`. Deterministic in `seed`."""
-        take = generate(motion, seconds, fps, seed)
+        return cls.of_take(
+            generate(motion, seconds, fps, seed), cameras, size, noise_px, dropout, seed
+        )
+
+    @classmethod
+    def of_take(
+        cls,
+        take: Take,
+        cameras: int = 2,
+        size: tuple[int, int] = (640, 480),
+        noise_px: float = 0.3,
+        dropout: float = 0.0,
+        seed: int = 0,
+    ) -> SyntheticCapture:
+        """Film any take (poses in meters, e.g. a BVH file's) as `film` does."""
         group = CameraGroup(tuple(spread_cameras(take.poses, cameras, size)))
         rng = np.random.default_rng([seed, 1])
         pixels = group.project(markers_of(take.poses.astype(np.float64)))

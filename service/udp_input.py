@@ -4,7 +4,9 @@ The arrival time of a datagram is the kernel's receive timestamp (`SO_TIMESTAMPN
 wall clock, nanoseconds) where the platform has it (Linux), so time a datagram spends
 queued in the socket while the server is busy counts towards its frame's latency;
 elsewhere it is the time the datagram is read. Every datagram waiting in the socket is
-read per wake-up, up to `MAX_BATCH`, and handed to `handle(data, arrival_s, sender)`.
+read per wake-up, up to `MAX_BATCH`, and handed to `handle(data, arrival_s, sender)`;
+datagrams longer than `max_bytes` arrive cut to `max_bytes + 1` bytes (camera packets:
+`decode` then drops them as too long).
 """
 
 from __future__ import annotations
@@ -35,8 +37,11 @@ class UdpInput:
     `port` 0 picks a free port; `address` tells which after `start`.
     """
 
-    def __init__(self, host: str, port: int, handle: Handler) -> None:
+    def __init__(
+        self, host: str, port: int, handle: Handler, max_bytes: int = MAX_PACKET_BYTES
+    ) -> None:
         self._handle = handle
+        self._buffer_bytes = max_bytes + 1
         self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)

@@ -72,3 +72,18 @@ def test_export_benchmark_prints_speed_and_round_trip_tables(
     out = capsys.readouterr().out
     assert "baseline: np.savetxt" in out and "write .usdc" in out and "retarget" in out
     assert "Round trip of 2 BVH files" in out and "worst" in out
+
+
+_spec_service = importlib.util.spec_from_file_location(
+    "bench_service", ROOT / "bench" / "bench_service.py"
+)
+bench_service = importlib.util.module_from_spec(_spec_service)
+_spec_service.loader.exec_module(bench_service)
+
+
+def test_service_benchmark_prints_its_latency_table(capsys: pytest.CaptureFixture[str]) -> None:
+    (row,) = bench_service.bench(1.0, [1], "samba")
+    out = capsys.readouterr().out
+    assert "Baseline, same run: Reconstructor.step (samba)" in out and "e2e p99" in out
+    assert row[:4] == [1, 120, 0, 0]  # 60 frames x 2 cameras in, every frame out and received
+    assert all(isinstance(v, float) and v > 0 for v in row[4:9])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -10,6 +11,9 @@ from pathlib import Path
 import pytest
 
 from db.store import PoseStore
+from export.gltf_reader import read_glb_joint_positions
+from export.usd_reader import read_usd_joint_positions
+from ingest.mcap_take import read_take
 from samba.cli import main
 
 
@@ -163,13 +167,18 @@ def test_wrong_flag_exits_2_without_traceback(tmp_path: Path) -> None:
     assert "Traceback" not in result.stderr
 
 
-def test_demo_runs_and_reports(tmp_path: Path, capsys) -> None:
-    code, out, _ = run(capsys, "demo", "--store", str(tmp_path / "demo"), "--takes-per-motion", "1")
+def test_demo_captures_live_and_writes_the_take_and_exports(tmp_path: Path, capsys) -> None:
+    code, out, _ = run(
+        capsys, "demo", "--out", str(tmp_path), "--seconds", "1.5", "--vmc", "127.0.0.1:9"
+    )
     assert code == 0
-    assert "index loaded without rebuilding" in out
-    assert "verify: ok" in out
-    for motion in ("walk", "run", "jumping_jacks", "arm_swing", "squat", "kick", "wave", "turn"):
-        assert motion in out
+    assert "frames out: 90 of 90" in out and "VMC frames received: 90" in out
+    assert (tmp_path / "takes" / "demo" / "demo_walk.mcap").is_file()
+    assert read_take(tmp_path / "takes" / "demo" / "demo_walk.mcap").poses.shape == (90, 13, 3)
+    assert read_usd_joint_positions(tmp_path / "exports" / "demo_walk.usda")[1].shape[0] == 90
+    assert read_glb_joint_positions(tmp_path / "exports" / "demo_walk.glb")[1].shape[0] == 90
+    error = re.search(r"joint error against the truth: mean ([0-9.]+) cm", out)
+    assert error and float(error.group(1)) < 5.0
 
 
 def test_an_unwritable_place_gives_one_clear_line(tmp_path: Path, capsys) -> None:

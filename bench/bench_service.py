@@ -1,0 +1,221 @@
+"""Live service latency and throughput: 1, 4 and 8 sessions x 2 cameras x 60 fps, loopback.
+
+Run from the project root:  python bench/bench_service.py [--seconds 10] [--sessions 1 4 8]
+                                                         [--method samba]
+
+For each session count, `samba serve --config` runs as its own process with that many
+sessions (same calibration and pose database, each with its own VMC receiver). This
+process plays a synthetic walk (projected markers, 0.3 px noise) to every session's two
+cameras on a 60 fps wall-clock grid, all sessions' packets of a frame at once, and
+receives the VMC bundles. Latency is measured two ways:
+
+* server: from the kernel receive time of a frame's last camera packet to its VMC
+  bundles handed to the network (the server's own percentiles, `/api/metrics`);
+* end to end: from this process sending a frame's last packet to the kernel receiving
+  the frame's last VMC bundle (both `time.time()` / `SO_TIMESTAMPNS` on one machine).
+
+Baseline, measured in the same run: one `Reconstructor.step` of the same method on the
+same markers in this process (the reconstruction alone, no I/O). Target (issue 6): p99 <= 10 ms
+with 4 sessions, no frame dropped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+from text_table import print_table  # noqa: E402
+
+from db.store import PoseStore  # noqa: E402
+from db.synthetic_store import build_synthetic_store  # noqa: E402
+from samba.calibration_file import write_calibration  # noqa: E402
+from samba.methods import method  # noqa: E402
+from samba.triangulation import Triangulation  # noqa: E402
+from service.packet import encode  # noqa: E402
+from service.synthetic_capture import SyntheticCapture  # noqa: E402
+from service.udp_input import UdpInput  # noqa: E402
+
+TARGET_P99_MS = 10.0
+FPS = 60.0
+
+
+def step_ms(capture: SyntheticCapture, store: Path, name: str) -> np.ndarray:
+    """Milliseconds of each `Reconstructor.step` over the capture's triangulated markers."""
+    views = Triangulation.from_views(
+        capture.cameras.projections, capture.cameras.undistort(capture.pixels), gate_px=10.0
+    )
+    reconstructor = method(name).build(PoseStore.open(store).index)
+    times = []
+    for markers in views.points:
+        start = time.perf_counter()
+        reconstructor.step(markers)
+        times.append(time.perf_counter() - start)
+    return np.array(times) * 1e3
+
+
+class VmcTimes:
+    """Kernel receive times of each session's frames: the time of the bundle carrying a
+    frame's `/VMC/Ext/T` message (the frame's last bundle)."""
+
+    def __init__(self, sessions: int) -> None:
+        self.inputs = [
+            UdpInput("127.0.0.1", 0, self._receiver(i), max_bytes=2048) for i in range(sessions)
+        ]
+        self.times: list[list[float]] = [[] for _ in range(sessions)]
+
+    def _receiver(self, session: int):
+        def receive(data: bytes, arrival: float, _sender: str) -> None:
+            if b"/VMC/Ext/T\x00" in data:
+                self.times[session].append(arrival)
+
+        return receive
+
+
+async def play(capture: SyntheticCapture, address: tuple[str, int], sessions: int) -> np.ndarray:
+    """Send every frame of `capture` to every session at its capture time; returns the
+    time (s) each frame's last packet left, (frames,)."""
+    sent = np.empty(capture.frames)
+    start_at = time.time() + 1.0
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        for frame in range(capture.frames):
+            delay = start_at + frame / FPS - time.time()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            for s in range(sessions):
+                for camera in range(len(capture.cameras)):
+                    packet = capture.packet(camera, frame, start_at, f"s{s}")
+                    sock.sendto(encode(packet), address)
+            sent[frame] = time.time()
+    return sent
+
+
+def run(
+    sessions: int, capture: SyntheticCapture, calibration: Path, store: Path, name: str, tmp: Path
+) -> list[object]:
+    """One row of the table: `sessions` sessions served by a `samba serve` process."""
+    receivers = VmcTimes(sessions)
+    config = tmp / f"serve{sessions}.toml"
+    tables = [
+        f'[[session]]\nname = "s{i}"\ncalibration = "{calibration}"\ndatabase = "{store}"\n'
+        f'method = "{name}"\nfps = {FPS}\nvmc = ["127.0.0.1:{r.address[1]}"]\n'
+        for i, r in enumerate(receivers.inputs)
+    ]
+    config.write_text("\n".join(tables))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    argv = [sys.executable, "-m", "samba.cli", "serve", "--config", str(config)]
+    argv += ["--udp", f"127.0.0.1:{port}", "--http", "127.0.0.1:0", "--takes", str(tmp)]
+    server = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        assert server.stdout is not None
+        line = next(line for line in server.stdout if "control API:" in line)
+        url = line.split("control API:")[1].split()[0].removesuffix("/api/health")
+
+        async def serve_frames() -> np.ndarray:
+            for receiver in receivers.inputs:
+                receiver.start()
+            sent = await play(capture, ("127.0.0.1", port), sessions)
+            await asyncio.sleep(0.5)
+            for receiver in receivers.inputs:
+                receiver.close()
+            return sent
+
+        sent = asyncio.run(serve_frames())
+        with urllib.request.urlopen(f"{url}/api/metrics", timeout=30) as answer:
+            metrics = json.load(answer)
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.communicate(timeout=60)
+    frames = capture.frames
+    out = [m["frames_out"] for m in metrics["sessions"].values()]
+    received = [len(t) for t in receivers.times]
+    latency = [np.array(t) - sent for t in receivers.times if len(t) == frames]
+    end_to_end = np.concatenate(latency) * 1e3 if latency else np.array([np.nan])
+    server_p50 = max(m["latency"]["p50_ms"] for m in metrics["sessions"].values())
+    server_p99 = max(m["latency"]["p99_ms"] for m in metrics["sessions"].values())
+    return [
+        sessions,
+        sessions * 2 * frames,
+        frames * sessions - sum(out),
+        frames * sessions - sum(received),
+        server_p50,
+        server_p99,
+        float(np.percentile(end_to_end, 50)),
+        float(np.percentile(end_to_end, 99)),
+        float(np.max(end_to_end)),
+        sum(out) / (frames / FPS),
+    ]
+
+
+def bench(seconds: float, sessions: list[int], name: str) -> list[list[object]]:
+    """Build the database, film the capture, measure every session count, print the
+    tables; returns the rows of the latency table."""
+    with tempfile.TemporaryDirectory() as folder:
+        tmp = Path(folder)
+        store = tmp / "db"
+        build_synthetic_store(store, takes_per_motion=3, seconds=6.0, seed=0)
+        capture = SyntheticCapture.film("walk", seconds, FPS, 2, (640, 480), seed=7)
+        calibration = tmp / "stage.toml"
+        write_calibration(calibration, capture.cameras)
+        with threadpool_limits(1):
+            baseline = step_ms(capture, store, name)
+        rows = [run(n, capture, calibration, store, name, tmp) for n in sessions]
+    base = float(np.percentile(baseline, 50))
+    print(
+        f"\nBaseline, same run: Reconstructor.step ({name}) in-process, no I/O: "
+        f"p50 {base:.2f} ms, p99 {np.percentile(baseline, 99):.2f} ms per frame"
+    )
+    print_table(
+        f"Live service, {seconds:g} s of 60 fps x 2 cameras per session, method {name} "
+        f"(latency ms; target p99 <= {TARGET_P99_MS:g} ms at 4 sessions)",
+        [
+            "sessions",
+            "packets",
+            "frames not out",
+            "VMC frames lost",
+            "server p50",
+            "server p99",
+            "e2e p50",
+            "e2e p99",
+            "e2e max",
+            "frames/s out",
+        ],
+        rows,
+    )
+    print_table(
+        "Ratios to the baseline step p50",
+        ["sessions", "server p50 / step", "e2e p99 / step"],
+        [[r[0], r[4] / base, r[7] / base] for r in rows],
+    )
+    return rows
+
+
+def main() -> None:
+    """Parse the flags and run the benchmark."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=10.0, help="capture length")
+    parser.add_argument("--sessions", type=int, nargs="+", default=[1, 4, 8])
+    parser.add_argument("--method", default="samba", help="reconstruction method")
+    args = parser.parse_args()
+    bench(args.seconds, args.sessions, args.method)
+
+
+if __name__ == "__main__":
+    main()
