@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import math
 import sys
 import time
 from collections.abc import Iterator
@@ -21,7 +20,7 @@ import numpy as np
 
 from samba.calibration_file import read_calibration
 from samba.camera import Camera
-from samba.cli_arguments import address, natural, positive_float
+from samba.cli_arguments import address, finite_float, natural, positive_float
 from samba.errors import InputError
 from samba.frame_source import open_frames
 from samba.skeleton import N_MARKERS
@@ -148,7 +147,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     synthetic.add_argument(
         "--start-at",
-        type=_finite,
+        type=finite_float,
         metavar="T",
         help="UNIX time of frame 0; frame i is captured at T + i / fps (default: now + "
         f"{START_DELAY_SECONDS:g} s). Nodes given the same motion, seed and T film the "
@@ -158,10 +157,13 @@ def register(parser: argparse.ArgumentParser) -> None:
         "subject start (video, images, webcam): where the subject stands in the standard "
         "pose when capture begins"
     )
-    subject.add_argument("--start-x", type=_finite, metavar="M", help="hip midpoint x, m (0)")
-    subject.add_argument("--start-z", type=_finite, metavar="M", help="hip midpoint z, m (0)")
+    subject.add_argument("--start-x", type=finite_float, metavar="M", help="hip midpoint x, m (0)")
+    subject.add_argument("--start-z", type=finite_float, metavar="M", help="hip midpoint z, m (0)")
     subject.add_argument(
-        "--heading", type=_finite, metavar="DEG", help="facing +Z turned towards +X, degrees (0)"
+        "--heading",
+        type=finite_float,
+        metavar="DEG",
+        help="facing +Z turned towards +X, degrees (0)",
     )
     subject.add_argument("--height", type=positive_float, metavar="M", help="stature, m (1.70)")
     parser.add_argument(
@@ -277,14 +279,3 @@ def _session(text: str) -> str:
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     return text
-
-
-def _finite(text: str) -> float:
-    """A finite number from a command-line word."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be finite, got {text}")
-    return value
