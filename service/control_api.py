@@ -139,8 +139,8 @@ async def _start_take(request: web.Request) -> web.Response:
     name = body.get("name")
     if name is not None and not isinstance(name, str):
         return _error(400, "request body: name must be a string")
-    if session.takes() and session.takes()[-1].recording:
-        return _error(409, f"{session.name}: take {session.takes()[-1].name!r} is recording")
+    if session.recording is not None:
+        return _error(409, f"{session.name}: take {session.recording.name!r} is recording")
     try:
         take = session.start_take(name)
     except SambaError as exc:
@@ -152,7 +152,7 @@ async def _stop_take(request: web.Request) -> web.Response:
     session = _server(request).sessions.get(request.match_info["name"])
     if session is None:
         return _error(404, f"{request.match_info['name']}: no such session")
-    if not (session.takes() and session.takes()[-1].recording):
+    if session.recording is None:
         return _error(409, f"{session.name}: no take is recording")
     return web.json_response({"take": session.stop_take().to_json()})
 

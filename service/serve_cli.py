@@ -148,8 +148,8 @@ def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:
         )
         if server.http_url:
             print(f"    viewer: {server.http_url}/viewer/{s.name}")
-        take = s.takes()[-1] if s.takes() else None
-        if take is not None and take.recording:
+        take = s.recording
+        if take is not None:
             print(f"    recording take {take.name} -> {take.path}")
     if server.http_url:
         print(f"  control API: {server.http_url}/api/health (Ctrl-C stops)")

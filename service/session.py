@@ -218,10 +218,15 @@ class CaptureSession:
         if self._recorder is not None:
             self._recorder.flush()
 
+    @property
+    def recording(self) -> TakeInfo | None:
+        """The take being recorded, None when none is."""
+        return None if self._recorder is None else self._take_info(self._recorder, True)
+
     def takes(self) -> list[TakeInfo]:
         """The takes recorded since the session started, the current one last."""
-        current = [] if self._recorder is None else [self._take_info(self._recorder, True)]
-        return [*self._takes, *current]
+        current = self.recording
+        return [*self._takes] if current is None else [*self._takes, current]
 
     def close(self) -> None:
         """Stop a recording take (its file stays complete) and close the VMC socket."""
@@ -249,7 +254,7 @@ class CaptureSession:
             "method": c.method,
             "fps": c.fps,
             "vmc": [f"{host}:{port}" for host, port in c.vmc],
-            "recording": None if self._recorder is None else self._recorder.name,
+            "recording": None if self.recording is None else self.recording.name,
             "frames_out": self.frames_out,
         }
 
