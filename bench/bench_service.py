@@ -1,13 +1,14 @@
 """Live service latency and throughput: 1, 4 and 8 sessions x 2 cameras x 60 fps, loopback.
 
 Run from the project root:  python bench/bench_service.py [--seconds 10] [--sessions 1 4 8]
-                                                         [--method samba]
+                                                         [--workers 0 2] [--method samba]
 
-For each session count, `samba serve --config` runs as its own process with that many
-sessions (same calibration and pose database, each with its own VMC receiver). This
-process plays a synthetic walk (projected markers, 0.3 px noise) to every session's two
-cameras on a 60 fps wall-clock grid, all sessions' packets of a frame at once, and
-receives the VMC bundles. Latency is measured two ways:
+For each session count and each number of worker processes (`samba serve --workers`; 0 =
+frames computed in the server's event loop), `samba serve --config` runs as its own
+process with that many sessions (same calibration and pose database, each with its own
+VMC receiver). This process plays a synthetic walk (projected markers, 0.3 px noise) to
+every session's two cameras on a 60 fps wall-clock grid, all sessions' packets of a frame
+at once, and receives the VMC bundles. Latency is measured two ways:
 
 * server: from the kernel receive time of a frame's last camera packet to its VMC
   bundles handed to the network (the server's own percentiles, `/api/metrics`);
@@ -106,9 +107,16 @@ async def play(capture: SyntheticCapture, address: tuple[str, int], sessions: in
 
 
 def run(
-    sessions: int, capture: SyntheticCapture, calibration: Path, store: Path, name: str, tmp: Path
+    sessions: int,
+    workers: int,
+    capture: SyntheticCapture,
+    calibration: Path,
+    store: Path,
+    name: str,
+    tmp: Path,
 ) -> list[object]:
-    """One row of the table: `sessions` sessions served by a `samba serve` process."""
+    """One row of the table: `sessions` sessions served by a `samba serve` process with
+    `workers` worker processes."""
     receivers = VmcTimes(sessions)
     config = tmp / f"serve{sessions}.toml"
     tables = [
@@ -122,6 +130,7 @@ def run(
         port = probe.getsockname()[1]
     argv = [sys.executable, "-m", "samba.cli", "serve", "--config", str(config)]
     argv += ["--udp", f"127.0.0.1:{port}", "--http", "127.0.0.1:0", "--takes", str(tmp)]
+    argv += ["--workers", str(workers)]
     server = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, text=True)
     try:
         assert server.stdout is not None
@@ -152,6 +161,7 @@ def run(
     server_p99 = max(m["latency"]["p99_ms"] for m in metrics["sessions"].values())
     return [
         sessions,
+        workers,
         sessions * 2 * frames,
         frames * sessions - sum(out),
         frames * sessions - sum(received),
@@ -164,7 +174,7 @@ def run(
     ]
 
 
-def bench(seconds: float, sessions: list[int], name: str) -> list[list[object]]:
+def bench(seconds: float, sessions: list[int], workers: list[int], name: str) -> list[list[object]]:
     """Build the database, film the capture, measure every session count, print the
     tables; returns the rows of the latency table."""
     with tempfile.TemporaryDirectory() as folder:
@@ -176,7 +186,9 @@ def bench(seconds: float, sessions: list[int], name: str) -> list[list[object]]:
         write_calibration(calibration, capture.cameras)
         with threadpool_limits(1):
             baseline = step_ms(capture, store, name)
-        rows = [run(n, capture, calibration, store, name, tmp) for n in sessions]
+        rows = [
+            run(n, w, capture, calibration, store, name, tmp) for n in sessions for w in workers
+        ]
     base = float(np.percentile(baseline, 50))
     print(
         f"\nBaseline, same run: Reconstructor.step ({name}) in-process, no I/O: "
@@ -187,6 +199,7 @@ def bench(seconds: float, sessions: list[int], name: str) -> list[list[object]]:
         f"(latency ms; target p99 <= {TARGET_P99_MS:g} ms at 4 sessions)",
         [
             "sessions",
+            "workers",
             "packets",
             "frames not out",
             "VMC frames lost",
@@ -201,8 +214,8 @@ def bench(seconds: float, sessions: list[int], name: str) -> list[list[object]]:
     )
     print_table(
         "Ratios to the baseline step p50",
-        ["sessions", "server p50 / step", "e2e p99 / step"],
-        [[r[0], r[4] / base, r[7] / base] for r in rows],
+        ["sessions", "workers", "server p50 / step", "e2e p99 / step"],
+        [[r[0], r[1], r[5] / base, r[8] / base] for r in rows],
     )
     return rows
 
@@ -212,9 +225,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="capture length")
     parser.add_argument("--sessions", type=int, nargs="+", default=[1, 4, 8])
+    parser.add_argument("--workers", type=int, nargs="+", default=[0, 2])
     parser.add_argument("--method", default="samba", help="reconstruction method")
     args = parser.parse_args()
-    bench(args.seconds, args.sessions, args.method)
+    bench(args.seconds, args.sessions, args.workers, args.method)
 
 
 if __name__ == "__main__":

@@ -17,8 +17,10 @@ import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from functools import partial
+from typing import NamedTuple
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 
 from samba.skeleton import N_JOINTS, Body
 from samba.take import Take
@@ -32,6 +34,8 @@ MOTIONS: tuple[str, ...] = (
     "kick",
     "wave",
     "turn",
+    "golf_swing",
+    "point",
 )
 
 _SEGMENTS: tuple[str, ...] = tuple(f.name for f in fields(Body) if f.name != "height")
@@ -393,6 +397,101 @@ def _turn(m: _Setup) -> _Plan:
     return plan
 
 
+class _GolfKey(NamedTuple):
+    """The angles of a golf swing's key pose in degrees, or (n,) arrays of them over frames
+    in radians. `tilt` leans the spine toward the ball (+Z) whatever the shoulders' turn;
+    `_l`/`_r` are the left/right arm."""
+
+    yaw: float | np.ndarray
+    twist: float | np.ndarray
+    tilt: float | np.ndarray
+    nod: float | np.ndarray
+    knee: float | np.ndarray
+    flex_l: float | np.ndarray
+    flex_r: float | np.ndarray
+    abd_l: float | np.ndarray
+    abd_r: float | np.ndarray
+    elbow_l: float | np.ndarray
+    elbow_r: float | np.ndarray
+
+
+_GOLF_KEYS: dict[str, _GolfKey] = {
+    "address": _GolfKey(0.0, 0.0, 35.0, 25.0, 20.0, 30.0, 40.0, -15.0, -18.0, 20.0, 10.0),
+    "top": _GolfKey(-40.0, -50.0, 30.0, 20.0, 18.0, 90.0, 60.0, -50.0, 27.0, 10.0, 90.0),
+    "impact": _GolfKey(25.0, -15.0, 33.0, 25.0, 22.0, 30.0, 40.0, -15.0, -17.0, 15.0, 10.0),
+    "finish": _GolfKey(70.0, 35.0, 10.0, 0.0, 15.0, 70.0, 105.0, -12.0, -34.0, 85.0, 15.0),
+}
+"""Key poses with the grip (both wrists within about 10 cm) below the chest at address
+and impact, over the right shoulder at the top and over the left one at the finish."""
+_GOLF_SCHEDULE: tuple[tuple[float, str], ...] = (
+    (0.0, "address"),
+    (0.15, "address"),
+    (0.42, "top"),
+    (0.46, "top"),
+    (0.52, "impact"),
+    (0.60, "finish"),
+    (0.75, "finish"),
+    (0.95, "address"),
+    (1.0, "address"),
+)
+"""Cycle phase of each key pose: a pause at address, backswing, a short stop at the top,
+a fast downswing through impact to the finish, a hold, and back to address."""
+
+
+def _golf_swing(m: _Setup) -> _Plan:
+    """A right-handed golf swing 0.35 times a second, the target at +X: address bent at
+    the hips, backswing with the hands over the right shoulder, downswing, follow-through
+    to the hands over the left shoulder, the pelvis turning and sliding with the swing.
+    Monotone cubic interpolation of the key poses: smooth, no overshoot, still in holds."""
+    plan = _Plan.rest(m)
+    times = [t for t, _ in _GOLF_SCHEDULE]
+    table = np.array([_GOLF_KEYS[name] for _, name in _GOLF_SCHEDULE])
+    ph = m.cycle(0.35)
+    k = _GolfKey(*np.radians(PchipInterpolator(times, table)(ph - np.floor(ph))).T)
+    heading = k.yaw + k.twist
+    plan.yaw, plan.twist, plan.nod = k.yaw, k.twist, k.nod
+    plan.lean, plan.bend = k.tilt * np.cos(heading), k.tilt * np.sin(heading)
+    plan.arm_flex = np.stack([k.flex_l, k.flex_r])
+    plan.arm_abd = np.stack([k.abd_l, k.abd_r])
+    plan.elbow = np.stack([k.elbow_l, k.elbow_r])
+    plan.feet[:, :, 0] += np.array(_SIDES)[:, None] * 0.05 * m.leg
+    plan.pelvis[:, 0] = 0.06 * m.leg * np.sin(k.yaw)
+    plan.pelvis[:, 2] = -0.2 * m.leg * np.sin(k.tilt)
+    plan.pelvis[:, 1] = _pelvis_height(plan, m.body, np.degrees(k.knee))
+    return plan
+
+
+def _point(m: _Setup) -> _Plan:
+    """Pointing 0.35 times a second: each time one arm (left or right at random) rises
+    straight to a random direction 0..75° out from the front and 5..40° above the
+    horizontal, holds, and lowers again, the chest turning a little toward it."""
+    plan = _Plan.rest(m)
+    ph = m.cycle(0.35)
+    cycle = np.floor(ph).astype(int)
+    cycle -= cycle[0]
+    count = cycle[-1] + 1
+    arm = m.rng.integers(2, size=count)[cycle]
+    azimuth = np.radians(m.rng.uniform(0.0, 75.0, count))[cycle]
+    elevation = np.radians(m.rng.uniform(5.0, 40.0, count))[cycle]
+    u = ph - np.floor(ph)
+    up = _smoothstep((u - 0.1) / 0.2) - _smoothstep((u - 0.7) / 0.2)
+    outward = np.cos(elevation) * np.sin(azimuth)
+    forward = np.cos(elevation) * np.cos(azimuth)
+    pointing = np.arange(2)[:, None] == arm  # (2, n)
+    # The arm along (outward, up, forward): abduction asin(outward), flexion atan2(forward,
+    # -up), inverting `_limb_axes`; both ramp up from rest with `up`.
+    rest_abd, rest_elbow = plan.arm_abd[0, 0], plan.elbow[0, 0]
+    plan.arm_flex = np.where(pointing, np.arctan2(forward, -np.sin(elevation)) * up, 0.0)
+    plan.arm_abd = np.where(pointing, rest_abd + (np.arcsin(outward) - rest_abd) * up, rest_abd)
+    plan.elbow = np.where(pointing, rest_elbow + (np.radians(4.0) - rest_elbow) * up, rest_elbow)
+    toward = np.array(_SIDES)[arm]
+    plan.twist = 0.3 * toward * azimuth * up
+    plan.pelvis[:, 0] = -0.02 * toward * up
+    plan.roll = np.radians(1.5) * toward * up
+    plan.pelvis[:, 1] = _pelvis_height(plan, m.body, 8.0)
+    return plan
+
+
 _BUILDERS: dict[str, Callable[[_Setup], _Plan]] = {
     "walk": partial(_locomotion, run=False),
     "run": partial(_locomotion, run=True),
@@ -402,6 +501,8 @@ _BUILDERS: dict[str, Callable[[_Setup], _Plan]] = {
     "kick": _kick,
     "wave": _wave,
     "turn": _turn,
+    "golf_swing": _golf_swing,
+    "point": _point,
 }
 
 

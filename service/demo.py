@@ -36,12 +36,15 @@ from samba.calibration_file import write_calibration
 from samba.cli_arguments import address, positive_float
 from samba.synthetic import MOTIONS
 from service.serve import LiveServer
+from service.session import CaptureSession
 from service.session_config import SessionConfig
 from service.synthetic_capture import SyntheticCapture, play
 from service.udp_input import UdpInput
 from service.vmc import MARIONETTE_PORT
 
 SESSION = "demo"
+DRAIN_S = 10.0
+"""How long the demo waits, after the last packet, for the server to finish the frames."""
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -103,7 +106,9 @@ async def _demo(folder: Path, args: argparse.Namespace) -> int:
         },
         "samba demo",
     )
-    live = LiveServer([config], folder / "takes", udp=("127.0.0.1", 0), http=("127.0.0.1", 0))
+    live = LiveServer(
+        [config], folder / "takes", udp=("127.0.0.1", 0), http=("127.0.0.1", 0), workers=1
+    )
     async with live:
         assert live.server is not None
         session = live.server.session(SESSION)
@@ -123,12 +128,21 @@ async def _demo(folder: Path, args: argparse.Namespace) -> int:
         await asyncio.gather(
             *(play(capture, live.udp_address, start_at, SESSION, cameras=[c]) for c in (0, 1))
         )
-        await asyncio.sleep(0.3)
+        deadline = time.time() + DRAIN_S
+        while not _all_out(session, capture.frames) and time.time() < deadline:
+            await asyncio.sleep(0.05)
+        await asyncio.sleep(0.1)  # the last VMC bundles reach the counter
         counter.close()
         take = session.stop_take()
         metrics = live.server.metrics()["sessions"][SESSION]
     _report(metrics, counter.frames, capture, take.path, folder)
     return 0
+
+
+def _all_out(session: CaptureSession, frames: int) -> bool:
+    """Whether every frame played has come out of `session`, or been skipped or lost."""
+    done = session.frames_out + session.frames_failed + session.sync.counts.skipped
+    return done >= frames
 
 
 def _capture(args: argparse.Namespace) -> tuple[SyntheticCapture, str]:

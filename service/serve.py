@@ -1,7 +1,10 @@
 """`LiveServer`: `samba serve` as one asyncio object — sessions, UDP input, timer, HTTP.
 
-The camera datagrams are read and processed in the event loop (`service.udp_input`,
-`service.server`); a single timer resolves frames whose wait for late cameras ran out.
+The camera datagrams are read and assembled into frames in the event loop
+(`service.udp_input`, `service.server`); a single timer resolves frames whose wait for
+late cameras ran out. The frames are computed in `workers` worker processes
+(`service.pipeline_workers.WorkerPipelines`), or in the event loop when `workers` is 0;
+results come back to the loop, which records them and feeds the viewer.
 The HTTP side (aiohttp) serves the control API (`service.control_api`) and the live
 viewer (`service.viewer`) on one port. The API is bound to 127.0.0.1 by default;
 binding it to any other address requires a token.
@@ -10,7 +13,9 @@ binding it to any other address requires a token.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import ipaddress
+import os
 import time
 from collections.abc import Iterable
 from pathlib import Path
@@ -20,6 +25,7 @@ from aiohttp import web
 
 from service.control_api import add_control_routes, token_middleware
 from service.errors import ServiceError
+from service.pipeline_workers import FrameDone, WorkerPipelines
 from service.server import CaptureServer
 from service.session_config import SessionConfig
 from service.udp_input import UdpInput
@@ -33,6 +39,8 @@ TIMER_SLACK_S = 0.0005
 """The frame timer fires this long after a deadline, so that a frame is surely due."""
 FLUSH_INTERVAL_S = 1.0
 """How often recording takes are flushed to the operating system, seconds."""
+DEFAULT_WORKERS = os.cpu_count() or 1
+"""Worker processes `samba serve` computes frames in by default: one per core."""
 
 
 def is_loopback(host: str) -> bool:
@@ -50,7 +58,8 @@ class LiveServer:
 
     `udp` and `http` are (host, port) to bind (port 0: any free port; `http=None`: no
     HTTP side). `token` protects the HTTP side and is required unless `http` is a
-    loopback address; `key` is the camera nodes' shared HMAC key. `ServiceError` for a
+    loopback address; `key` is the camera nodes' shared HMAC key; `workers` the number
+    of worker processes computing frames (0: in the event loop). `ServiceError` for a
     missing token; session files are opened by `start`.
     """
 
@@ -63,6 +72,7 @@ class LiveServer:
         http: tuple[str, int] | None = ("127.0.0.1", HTTP_PORT),
         token: str | None = None,
         key: bytes | None = None,
+        workers: int = 0,
     ) -> None:
         if http is not None and token is None and not is_loopback(http[0]):
             raise ServiceError(
@@ -76,6 +86,7 @@ class LiveServer:
         self._http_bind = http
         self._token = token
         self._key = key
+        self._workers = workers
         self.hub = ViewerHub()
         self.server: CaptureServer | None = None
         self._udp: UdpInput | None = None
@@ -87,8 +98,15 @@ class LiveServer:
 
     async def start(self) -> None:
         """Open the sessions (in a worker thread) and the sockets, and start serving."""
+        loop = asyncio.get_running_loop()
+
+        def deliver(done: FrameDone) -> None:  # called by the workers' reader threads
+            with contextlib.suppress(RuntimeError):  # the loop has closed: nobody waits
+                loop.call_soon_threadsafe(self._deliver, done)
+
+        pipelines = WorkerPipelines(self._workers, deliver) if self._workers else None
         self.server = await asyncio.to_thread(
-            CaptureServer, self._configs, self._takes_dir, self._key, self.hub
+            CaptureServer, self._configs, self._takes_dir, self._key, self.hub, pipelines
         )
         try:
             self._udp = UdpInput(*self._udp_bind, self._on_datagram)
@@ -162,6 +180,10 @@ class LiveServer:
             await asyncio.sleep(FLUSH_INTERVAL_S)
             for session in list(self.server.sessions.values()):
                 session.flush_take()
+
+    def _deliver(self, done: FrameDone) -> None:
+        if self.server is not None:
+            self.server.deliver(done)
 
     def _on_datagram(self, data: bytes, arrival: float, sender: str) -> None:
         assert self.server is not None

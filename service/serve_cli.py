@@ -12,11 +12,11 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from samba.cli_arguments import address, bind_address, positive_float
+from samba.cli_arguments import address, bind_address, natural, positive_float
 from samba.methods import METHODS
 from service.errors import ServiceError
 from service.packet import read_key_file
-from service.serve import HTTP_PORT, UDP_PORT, LiveServer
+from service.serve import DEFAULT_WORKERS, HTTP_PORT, UDP_PORT, LiveServer
 from service.session import CaptureSession
 from service.session_config import SessionConfig, read_sessions
 
@@ -62,6 +62,13 @@ def register(parser: argparse.ArgumentParser) -> None:
     net.add_argument("--no-http", action="store_true", help="no control API or viewer")
     net.add_argument("--token", help="API token (default $SAMBA_TOKEN); needed beyond loopback")
     net.add_argument("--key-file", help="shared HMAC key file; packets must then be signed")
+    parser.add_argument(
+        "--workers",
+        type=natural,
+        default=DEFAULT_WORKERS,
+        help="processes computing the frames, sessions spread over them (default: one per "
+        f"core, {DEFAULT_WORKERS} here; 0 = in the server's event loop)",
+    )
     parser.add_argument("--takes", default="takes", help="folder of recorded takes")
     parser.add_argument(
         "--record",
@@ -87,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
         http=None if args.no_http else args.http,
         token=args.token or os.environ.get("SAMBA_TOKEN") or None,
         key=key,
+        workers=args.workers,
     )
     # Per-frame linear algebra is on 39 x 39 matrices: BLAS threads only contend with
     # the event loop (and each other) for the cores.
@@ -143,7 +151,7 @@ def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:
         vmc = ", ".join(f"{h}:{p}" for h, p in c.vmc) or "none"
         print(
             f"  session {s.name}: {len(s.cameras)} cameras ({c.calibration}), database "
-            f"{c.database} ({len(s.reconstructor.source.poses)} poses), method {c.method}, "
+            f"{c.database} ({s.database_poses} poses), method {c.method}, "
             f"{c.fps:g} fps, VMC -> {vmc}"
         )
         if server.http_url:

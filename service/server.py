@@ -6,6 +6,10 @@ No sockets here (`service.udp_input` reads them, `service.serve` runs everything
 the session its session id names — or, when the id is empty, to the only session. A
 datagram that is dropped is counted by reason: a `PacketError` reason, or
 "unknown session". Nothing a sender does raises out of `receive`.
+
+The sessions' frames are computed by `pipelines` (`service.pipeline_workers`; by
+default `InlinePipelines`, in the caller's thread); whatever runs them hands each
+result to `deliver`, which passes it to its session.
 """
 
 from __future__ import annotations
@@ -17,7 +21,8 @@ from typing import Any
 
 from service.errors import PacketError, ServiceError
 from service.packet import decode
-from service.session import CaptureSession, FrameResult
+from service.pipeline_workers import FrameDone, InlinePipelines
+from service.session import CaptureSession, Pipelines
 from service.session_config import SessionConfig
 from service.viewer import ViewerHub
 
@@ -30,7 +35,8 @@ class CaptureServer:
 
     `takes_dir`: folder of recorded takes (a sub-folder per session). `key`: the shared
     secret camera nodes sign packets with (None: packets must be unsigned).
-    `viewer`: where sessions send frames for the live viewer.
+    `viewer`: where sessions send frames for the live viewer. `pipelines`: where the
+    frames are computed, created with `deliver` as its callback (None: inline).
     """
 
     def __init__(
@@ -39,10 +45,12 @@ class CaptureServer:
         takes_dir: str | Path,
         key: bytes | None = None,
         viewer: ViewerHub | None = None,
+        pipelines: Pipelines | None = None,
     ) -> None:
         self.takes_dir = Path(takes_dir)
         self.key = key
         self._viewer = viewer
+        self.pipelines = InlinePipelines(self.deliver) if pipelines is None else pipelines
         self.sessions: dict[str, CaptureSession] = {}
         self.datagrams = 0
         self.drops: Counter[str] = Counter()
@@ -62,7 +70,7 @@ class CaptureServer:
         so a caller may run it in a worker thread (loading a large database takes a
         while). `ServiceError` if the name is taken, or as `CaptureSession` raises."""
         self._check_free(config.name)
-        return CaptureSession(config, self.takes_dir / config.name, self._viewer)
+        return CaptureSession(config, self.takes_dir / config.name, self.pipelines, self._viewer)
 
     def attach(self, session: CaptureSession) -> CaptureSession:
         """Start routing packets to an opened session; `ServiceError` (and the session is
@@ -91,26 +99,37 @@ class CaptureServer:
         except KeyError:
             raise ServiceError(name, "no such session") from None
 
-    def receive(self, data: bytes, arrival: float, sender: str = "packet") -> list[FrameResult]:
-        """Handle one datagram from `sender` that arrived at `arrival` (s, wall clock);
-        returns the frames it let the sessions process."""
+    def receive(self, data: bytes, arrival: float, sender: str = "packet") -> None:
+        """Handle one datagram from `sender` that arrived at `arrival` (s, wall clock)."""
         self.datagrams += 1
         try:
             packet = decode(data, self.key, source=sender)
         except PacketError as exc:
             self.drops[exc.reason] += 1
-            return []
+            return
         session = self.sessions.get(packet.session)
         if session is None and packet.session == "" and len(self.sessions) == 1:
             session = next(iter(self.sessions.values()))
         if session is None:
             self.drops[UNKNOWN_SESSION] += 1
-            return []
-        return session.on_packet(packet, arrival)
+            return
+        session.on_packet(packet, arrival)
 
-    def tick(self, now: float) -> list[FrameResult]:
-        """Process every session's frames whose wait ran out at `now` (s)."""
-        return [r for s in list(self.sessions.values()) for r in s.on_timer(now)]
+    def tick(self, now: float) -> None:
+        """Submit every session's frames whose wait ran out at `now` (s)."""
+        for session in list(self.sessions.values()):
+            session.on_timer(now)
+
+    def deliver(self, done: FrameDone) -> None:
+        """Pass a computed (or failed) frame to its session; a session that has been
+        removed meanwhile is ignored."""
+        session = self.sessions.get(done.session)
+        if session is None:
+            return
+        if done.output is not None:
+            session.complete(done.sequence, done.output)
+        else:
+            session.fail(done.sequence, done.error or "unknown error")
 
     def deadline(self) -> float | None:
         """The earliest time (s) `tick` has work, None if no frame waits."""
@@ -121,11 +140,14 @@ class CaptureServer:
         """A JSON-ready snapshot: datagrams in, drops by reason, and per-session metrics."""
         return {
             "datagrams": self.datagrams,
+            "workers": self.pipelines.worker_pids(),
             "dropped": {"total": self.drops.total(), **dict(sorted(self.drops.items()))},
             "sessions": {name: s.metrics() for name, s in self.sessions.items()},
         }
 
     def close(self) -> None:
-        """Close every session (recording takes are finished, not lost)."""
+        """Close every session (recording takes are finished, not lost) and stop the
+        pipelines' workers."""
         for session in self.sessions.values():
             session.close()
+        self.pipelines.shutdown()

@@ -1,12 +1,11 @@
 """`CaptureSession`: one subject's live capture, from camera packets to avatar poses.
 
 Per frame assembled by `FrameSync` (one packet per camera, or at least `min_cameras`
-after waiting `wait_ms`): undistort the cameras' labelled pixels, triangulate the 8
-markers (DLT with outlier gating), reconstruct the 13 joints with the session's pose
-database and method (`samba.reconstruction.Reconstructor.step`, the same code as the
-offline reconstruction), retarget them to the avatar (`export.live_retarget`), and send
-the result to every output: VMC bundles to the game engines, a frame to the viewer, a
-frame to the take being recorded.
+after waiting `wait_ms`), the session hands the cameras' labelled pixels to its
+`FramePipeline` (triangulation, reconstruction, retargeting, VMC out; in the event loop
+or in a worker process, see `service.pipeline_workers`). When the computed frame comes
+back (`complete`), the session counts it, sends it to the viewer and writes it to the
+take being recorded.
 
 Times are wall-clock seconds (`time.time()`, the clock the server stamps arriving
 datagrams with); the latency of a frame runs from the arrival of its last packet to
@@ -15,49 +14,47 @@ the moment its VMC bundles have been handed to the network.
 
 from __future__ import annotations
 
+import logging
 import re
 import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from db.index import PoseIndex
-from db.store import PoseStore
-from export.avatar_file import read_avatar_rig
-from export.humanoid import HumanoidRig
-from export.live_retarget import LiveRetarget
 from samba.calibration_file import read_calibration
-from samba.methods import method
-from samba.reconstruction import PoseEstimate
-from samba.skeleton import N_MARKERS, mirror_poses
-from samba.triangulation import Triangulation
+from samba.skeleton import N_MARKERS
 from service.errors import ServiceError
+from service.frame_pipeline import FrameOutput
 from service.frame_sync import FrameSync, SyncedFrame
 from service.metrics import LatencyWindow
 from service.packet import MarkerPacket
 from service.session_config import SessionConfig
 from service.take_recorder import TakeRecorder
 from service.viewer import ViewerHub, frame_message
-from service.vmc import VmcSender, frame_bundles, unity_values
+
+LOG = logging.getLogger(__name__)
 
 TAKE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 """A take name given to `start_take`: it becomes the file name `<name>.mcap`."""
 
 
-@dataclass(frozen=True)
-class FrameResult:
-    """One processed frame: `time` capture time (s, server clock), `markers` (8, 3)
-    triangulated meters (NaN = missing), the reconstruction `estimate`, the `cameras`
-    that contributed and the `latency` in seconds."""
+class Pipelines(Protocol):
+    """Where sessions' frames are computed (`service.pipeline_workers`)."""
 
-    time: float
-    markers: np.ndarray
-    estimate: PoseEstimate
-    cameras: tuple[int, ...]
-    latency: float
+    def open(self, config: SessionConfig, clock_zero: float) -> int: ...
+
+    def submit(
+        self, session: str, sequence: int, pixels: np.ndarray, frame_time: float, arrival: float
+    ) -> None: ...
+
+    def close_session(self, session: str) -> None: ...
+
+    def worker_pids(self) -> list[int]: ...
+
+    def shutdown(self) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -83,44 +80,39 @@ class TakeInfo:
 class CaptureSession:
     """A running capture session; see the module docstring.
 
-    Opens the calibration and the pose database (read only: nothing is written to the
-    store) and the VMC socket; raises `ServiceError` / `InputError` naming the file
-    when one cannot be used. `takes_dir` is where `start_take` writes; frames go to
-    `viewer` while the session has viewer clients.
+    Reads the calibration and opens the session's pipeline in `pipelines` (which opens
+    the pose database read only and the VMC socket); raises `ServiceError` /
+    `InputError` naming the file when one cannot be used. `takes_dir` is where
+    `start_take` writes; frames go to `viewer` while the session has viewer clients.
     """
 
     def __init__(
-        self, config: SessionConfig, takes_dir: str | Path, viewer: ViewerHub | None = None
+        self,
+        config: SessionConfig,
+        takes_dir: str | Path,
+        pipelines: Pipelines,
+        viewer: ViewerHub | None = None,
     ) -> None:
         self.config = config
         self.takes_dir = Path(takes_dir)
         self._viewer = viewer
         self.cameras = read_calibration(config.calibration)
-        self._projections = self.cameras.projections
-        chosen = method(config.method)
-        store = PoseStore.open(config.database)
-        index = store.index
-        if chosen.mirrored_database:
-            poses = np.asarray(store.poses)
-            index = PoseIndex.build(
-                np.concatenate([poses, mirror_poses(poses)]), scale_by_tibia=store.scale_by_tibia
-            )
-        self.reconstructor = chosen.build(index)
-        self.rig = (
-            HumanoidRig.from_body() if config.avatar is None else read_avatar_rig(config.avatar)
-        )
-        self.retarget = LiveRetarget(self.rig)
+        self.started = time.time()
+        self._pipelines = pipelines
+        self.database_poses = pipelines.open(config, self.started)
         self.sync = FrameSync(
             range(len(self.cameras)),
             config.fps,
             wait_s=config.wait_ms / 1e3,
             min_cameras=min(config.min_cameras, len(self.cameras)),
         )
-        self.vmc = VmcSender(config.vmc)
         self.latency = LatencyWindow()
         self.frames_out = 0
+        self.frames_failed = 0
         self.predicted_frames = 0
-        self.started = time.time()
+        self.vmc_errors = 0
+        self._sequence = 0
+        self._in_flight: dict[int, SyncedFrame] = {}
         self._recorder: TakeRecorder | None = None
         self._takes: list[TakeInfo] = []
 
@@ -129,37 +121,40 @@ class CaptureSession:
         """The session's name (the packets' session id)."""
         return self.config.name
 
-    def on_packet(self, packet: MarkerPacket, arrival: float) -> list[FrameResult]:
-        """Take one decoded packet that arrived at `arrival` (s) and process the frames it
+    def on_packet(self, packet: MarkerPacket, arrival: float) -> None:
+        """Take one decoded packet that arrived at `arrival` (s) and submit the frames it
         completes or pushes out."""
-        return [self._process(f) for f in self.sync.add(packet, arrival)]
+        for frame in self.sync.add(packet, arrival):
+            self._submit(frame)
 
-    def on_timer(self, now: float) -> list[FrameResult]:
-        """Process the frames whose wait for late cameras has run out at `now` (s)."""
-        return [self._process(f) for f in self.sync.expire(now)]
+    def on_timer(self, now: float) -> None:
+        """Submit the frames whose wait for late cameras has run out at `now` (s)."""
+        for frame in self.sync.expire(now):
+            self._submit(frame)
 
     def deadline(self) -> float | None:
         """When `on_timer` is next due (s), None if no frame is waiting."""
         return self.sync.deadline()
 
-    def _process(self, frame: SyncedFrame) -> FrameResult:
+    def _submit(self, frame: SyncedFrame) -> None:
         pixels = np.full((len(self.cameras), N_MARKERS, 2), np.nan)
         for camera, packet in frame.packets.items():
             pixels[camera] = packet.markers
-        views = Triangulation.from_views(
-            self._projections,
-            self.cameras.undistort(pixels),
-            gate_px=self.config.gate_px or None,
-        )
-        markers = views.points
-        estimate = self.reconstructor.step(markers)
-        rotations, root = self.retarget.step(estimate.pose)
-        positions, unity_rotations = unity_values(root, rotations, self.rig)
-        self.vmc.send(frame_bundles(positions, unity_rotations, frame.time - self.started))
-        latency = time.time() - frame.last_arrival
-        self.latency.add(latency)
+        self._sequence += 1
+        self._in_flight[self._sequence] = frame
+        self._pipelines.submit(self.name, self._sequence, pixels, frame.time, frame.last_arrival)
+
+    def complete(self, sequence: int, output: FrameOutput) -> None:
+        """Take the pipeline's `output` for frame `sequence`: count it, record it, show it
+        (a frame no longer in flight is ignored)."""
+        frame = self._in_flight.pop(sequence, None)
+        if frame is None:
+            return
+        estimate, markers = output.estimate, output.markers
+        self.latency.add(output.latency)
         self.frames_out += 1
         self.predicted_frames += estimate.predicted
+        self.vmc_errors = output.vmc_errors
         if self._recorder is not None:
             self._recorder.write_frame(
                 max(0, round(frame.time * 1e9)),
@@ -176,12 +171,17 @@ class CaptureSession:
                     frame.time,
                     estimate.pose,
                     markers,
-                    latency * 1e3,
+                    output.latency * 1e3,
                     estimate.confident,
                     estimate.predicted,
                 ),
             )
-        return FrameResult(frame.time, markers, estimate, tuple(frame.packets), latency)
+
+    def fail(self, sequence: int, reason: str) -> None:
+        """Frame `sequence` could not be computed: count it as failed and log why."""
+        if self._in_flight.pop(sequence, None) is not None:
+            self.frames_failed += 1
+            LOG.error("session %s: a frame was lost: %s", self.name, reason)
 
     # -- takes ---------------------------------------------------------------------------
 
@@ -229,10 +229,10 @@ class CaptureSession:
         return [*self._takes] if current is None else [*self._takes, current]
 
     def close(self) -> None:
-        """Stop a recording take (its file stays complete) and close the VMC socket."""
+        """Stop a recording take (its file stays complete) and close the pipeline."""
         if self._recorder is not None:
             self.stop_take()
-        self.vmc.close()
+        self._pipelines.close_session(self.name)
 
     @staticmethod
     def _take_info(recorder: TakeRecorder, recording: bool) -> TakeInfo:
@@ -251,6 +251,7 @@ class CaptureSession:
             ],
             "calibration": str(c.calibration),
             "database": str(c.database),
+            "database_poses": self.database_poses,
             "method": c.method,
             "fps": c.fps,
             "vmc": [f"{host}:{port}" for host, port in c.vmc],
@@ -264,8 +265,10 @@ class CaptureSession:
         return {
             "frames_out": self.frames_out,
             "frames_predicted": self.predicted_frames,
+            "frames_failed": self.frames_failed,
+            "frames_in_flight": len(self._in_flight),
             "sync": dict(vars(counts)),
             "latency": self.latency.summary(),
-            "vmc_send_errors": sum(self.vmc.errors.values()),
+            "vmc_send_errors": self.vmc_errors,
             "uptime_s": round(time.time() - self.started, 3),
         }

@@ -24,14 +24,20 @@ from service.synthetic_capture import SyntheticCapture, play
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.parametrize("workers", [0, 2], ids=["in the event loop", "in worker processes"])
 def test_live_path_gives_the_offline_poses_and_streams_every_frame(
-    live_store: Path, live_calibration: Path, live_capture: SyntheticCapture, tmp_path: Path
+    live_store: Path,
+    live_calibration: Path,
+    live_capture: SyntheticCapture,
+    tmp_path: Path,
+    workers: int,
 ) -> None:
     vmc = VmcReceiver()
 
     async def run() -> dict:
         cfg = config(live_calibration, live_store, vmc=[vmc.target], wait_ms=200)
-        async with LiveServer([cfg], tmp_path / "takes", udp=("127.0.0.1", 0), http=None) as live:
+        bind = {"udp": ("127.0.0.1", 0), "http": None, "workers": workers}
+        async with LiveServer([cfg], tmp_path / "takes", **bind) as live:
             assert live.server is not None
             session = live.server.session("stage")
             session.start_take("walk")

@@ -183,6 +183,19 @@ def test_fuzzed_datagrams_are_counted_and_dropped(
         assert accepted == 0
 
 
+def children(pid: int) -> list[int]:
+    """Process ids of the live child processes of `pid` (from /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
 def test_kill_9_mid_take_keeps_the_take_and_the_database(
     live_store: Path, live_calibration: Path, live_capture: SyntheticCapture, tmp_path: Path
 ) -> None:
@@ -194,9 +207,15 @@ def test_kill_9_mid_take_keeps_the_take_and_the_database(
         asyncio.run(play(live_capture, server.udp, time.time() + 0.2, "stage"))
         asyncio.run(play(live_capture, server.udp, time.time() + 0.1, "stage", sequence0=200))
         time.sleep(1.5)  # the server flushes the take every second, frames or not
+        workers = children(server.process.pid)
         os.kill(server.process.pid, signal.SIGKILL)
         server.process.wait(timeout=30)
     assert server.process.returncode == -signal.SIGKILL
+    assert workers  # frames were computed in worker processes; they end with the server
+    deadline = time.time() + 30
+    while any(Path(f"/proc/{pid}").exists() for pid in workers) and time.time() < deadline:
+        time.sleep(0.1)
+    assert not any(Path(f"/proc/{pid}").exists() for pid in workers)
     take = read_take(tmp_path / "stage" / "killed.mcap")
     assert len(take) == 2 * live_capture.frames and "cut short" in take.warnings[0]
     after = {

@@ -11,7 +11,7 @@ from samba.skeleton import Body, bone_lengths
 from samba.synthetic import MOTIONS, generate, library, random_body
 from samba.take import Take
 
-CONTACT_MOTIONS = ("walk", "squat", "wave", "arm_swing", "turn", "kick")
+CONTACT_MOTIONS = ("walk", "squat", "wave", "arm_swing", "turn", "kick", "golf_swing", "point")
 FLIGHT_MOTIONS = ("run", "jumping_jacks")
 SEEDS = (0, 1, 2)
 N_FRAMES = 120  # 4 s at 30 fps, the defaults
@@ -43,6 +43,8 @@ def test_motion_names() -> None:
         "kick",
         "wave",
         "turn",
+        "golf_swing",
+        "point",
     )
     assert set(CONTACT_MOTIONS) | set(FLIGHT_MOTIONS) == set(MOTIONS)
 
@@ -158,7 +160,7 @@ def test_speed_scales_walking() -> None:
     assert travel[1] / travel[0] == pytest.approx(1.5, rel=0.02)
 
 
-@pytest.mark.parametrize("motion", ["walk", "run", "turn", "kick"])
+@pytest.mark.parametrize("motion", ["walk", "run", "turn", "kick", "golf_swing", "point"])
 def test_stance_feet_do_not_slide(motion: str) -> None:
     poses = _take(motion, 1).poses.astype(np.float64)
     for foot in (11, 12):
@@ -197,6 +199,30 @@ def test_wave_raises_one_hand_over_the_head() -> None:
     above = poses[:, [5, 6], 1] > poses[:, [0], 1]
     assert above.any(axis=1).all()
     assert not above.all(axis=1).any()
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_golf_swing_bends_at_the_hips_and_swings_over_both_shoulders(seed: int) -> None:
+    poses = _take("golf_swing", seed).poses.astype(np.float64)
+    trunk = poses[:, [1, 2]].mean(axis=1) - _pelvis(poses)
+    tilt = np.degrees(np.arccos(trunk[:, 1] / np.linalg.norm(trunk, axis=1)))
+    assert tilt.max() > 25.0
+    feet = poses[:, [11, 12]].mean(axis=1)
+    left = poses[0, 11] - poses[0, 12]  # the planted feet: the body's left, the target
+    hands = poses[:, [5, 6]]
+    side = np.einsum("nk,k->n", hands.mean(axis=1) - feet, left / np.linalg.norm(left))
+    raised = hands[:, :, 1].min(axis=1) > poses[:, [1, 2], 1].max(axis=1)
+    assert (raised & (side < -0.15)).any()  # the top of the backswing, over the right
+    assert (raised & (side > 0.15)).any()  # the finish, over the left
+    assert np.linalg.norm(hands[:, 0] - hands[:, 1], axis=1).max() < 0.2  # one grip
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_point_raises_one_arm_at_a_time(seed: int) -> None:
+    poses = _take("point", seed).poses
+    above = poses[:, [5, 6], 1] - poses[:, [1, 2], 1]  # wrist over its own shoulder, m
+    assert (above.max(axis=1) >= 0.0).any()
+    assert (above.min(axis=1) < -0.3).all()
 
 
 def test_takes_start_at_random_places_and_headings() -> None:

@@ -1,0 +1,100 @@
+"""`FramePipeline`: what a capture session computes for each frame.
+
+From the labelled pixels of a frame's cameras: undistort them, triangulate the 8 markers
+(DLT with outlier gating), reconstruct the 13 joints with the session's pose database
+and method (`samba.reconstruction.Reconstructor.step`, the same code as the offline
+reconstruction), retarget them to the avatar (`export.live_retarget`) and hand the VMC
+bundles to the network. It holds all of a session's CPU work and none of its
+bookkeeping, so a server can run it beside its event loop in a worker process
+(`service.pipeline_workers`); `service.session.CaptureSession` keeps the rest.
+
+Times are wall-clock seconds (`time.time()`); a frame's latency runs from the arrival
+of its last packet to the moment its VMC bundles have been sent.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from db.index import PoseIndex
+from db.store import PoseStore
+from export.avatar_file import read_avatar_rig
+from export.humanoid import HumanoidRig
+from export.live_retarget import LiveRetarget
+from samba.calibration_file import read_calibration
+from samba.methods import method
+from samba.reconstruction import PoseEstimate
+from samba.skeleton import mirror_poses
+from samba.triangulation import Triangulation
+from service.session_config import SessionConfig
+from service.vmc import VmcSender, frame_bundles, unity_values
+
+
+@dataclass(frozen=True)
+class FrameOutput:
+    """One computed frame: `markers` (8, 3) triangulated meters (NaN = missing), the
+    reconstruction `estimate`, the `latency` in seconds from the frame's last packet to
+    its VMC bundles sent, and `vmc_errors`, the VMC datagrams the network refused so far
+    in this session."""
+
+    markers: np.ndarray
+    estimate: PoseEstimate
+    latency: float
+    vmc_errors: int
+
+
+class FramePipeline:
+    """One session's per-frame computation; see the module docstring.
+
+    Opens the calibration and the pose database (read only) and the VMC socket; raises
+    `InputError` subclasses naming the file when one cannot be used. VMC time stamps
+    count seconds from `clock_zero` (wall clock, s).
+    """
+
+    def __init__(self, config: SessionConfig, clock_zero: float) -> None:
+        self.config = config
+        self.clock_zero = clock_zero
+        self.cameras = read_calibration(config.calibration)
+        self._projections = self.cameras.projections
+        chosen = method(config.method)
+        store = PoseStore.open(config.database)
+        index = store.index
+        if chosen.mirrored_database:
+            poses = np.asarray(store.poses)
+            index = PoseIndex.build(
+                np.concatenate([poses, mirror_poses(poses)]), scale_by_tibia=store.scale_by_tibia
+            )
+        self.reconstructor = chosen.build(index)
+        self.rig = (
+            HumanoidRig.from_body() if config.avatar is None else read_avatar_rig(config.avatar)
+        )
+        self.retarget = LiveRetarget(self.rig)
+        self.vmc = VmcSender(config.vmc)
+
+    @property
+    def database_poses(self) -> int:
+        """How many poses the reconstruction searches."""
+        return len(self.reconstructor.source.poses)
+
+    def process(self, pixels: np.ndarray, frame_time: float, last_arrival: float) -> FrameOutput:
+        """Compute one frame from `pixels` (cameras, 8, 2) as the cameras measured them
+        (NaN = not seen), captured at `frame_time` and complete at `last_arrival` (s)."""
+        views = Triangulation.from_views(
+            self._projections,
+            self.cameras.undistort(pixels),
+            gate_px=self.config.gate_px or None,
+        )
+        markers = views.points
+        estimate = self.reconstructor.step(markers)
+        rotations, root = self.retarget.step(estimate.pose)
+        positions, unity_rotations = unity_values(root, rotations, self.rig)
+        self.vmc.send(frame_bundles(positions, unity_rotations, frame_time - self.clock_zero))
+        latency = time.time() - last_arrival
+        return FrameOutput(markers, estimate, latency, sum(self.vmc.errors.values()))
+
+    def close(self) -> None:
+        """Close the VMC socket."""
+        self.vmc.close()

@@ -1,0 +1,113 @@
+"""Frames computed in worker processes: the same poses as in the event loop, the order
+kept, refused files named, and a worker that dies replaced without stopping the server."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from live_fixtures import config
+
+from samba.errors import InputError
+from service.errors import ServiceError
+from service.pipeline_workers import FrameDone, InlinePipelines, WorkerPipelines
+from service.synthetic_capture import SyntheticCapture
+
+
+class Collected:
+    """A `deliver` callable collecting `FrameDone`s from any thread."""
+
+    def __init__(self) -> None:
+        self.done: list[FrameDone] = []
+        self._changed = threading.Condition()
+
+    def __call__(self, done: FrameDone) -> None:
+        with self._changed:
+            self.done.append(done)
+            self._changed.notify_all()
+
+    def wait_for(self, count: int, timeout: float = 60.0) -> list[FrameDone]:
+        """The first `count` deliveries; fails after `timeout` seconds."""
+        with self._changed:
+            assert self._changed.wait_for(lambda: len(self.done) >= count, timeout), self.done
+            return self.done[:count]
+
+
+def submit_all(pipelines: InlinePipelines | WorkerPipelines, capture: SyntheticCapture) -> None:
+    for frame in range(capture.frames):
+        pixels = capture.pixels[:, frame]
+        pipelines.submit("stage", frame, pixels, frame / 60.0, time.time())
+
+
+def test_workers_give_the_poses_of_the_event_loop_in_order(
+    live_store: Path, live_calibration: Path, live_capture: SyntheticCapture
+) -> None:
+    inline, workers = Collected(), Collected()
+    local = InlinePipelines(inline)
+    pool = WorkerPipelines(2, workers)
+    try:
+        assert pool.open(config(live_calibration, live_store), 0.0) == local.open(
+            config(live_calibration, live_store), 0.0
+        )
+        submit_all(local, live_capture)
+        submit_all(pool, live_capture)
+        remote = workers.wait_for(live_capture.frames)
+        assert len(pool.worker_pids()) == 1  # one session: one process started
+    finally:
+        pool.shutdown()
+        local.shutdown()
+    assert [d.sequence for d in remote] == list(range(live_capture.frames))
+    here = np.array([d.output.estimate.pose for d in inline.done])
+    there = np.array([d.output.estimate.pose for d in remote])
+    np.testing.assert_array_equal(there, here)  # the same code, the same numbers
+
+
+def test_sessions_spread_over_the_workers_and_a_bad_file_is_named(
+    live_store: Path, live_calibration: Path, tmp_path: Path
+) -> None:
+    pool = WorkerPipelines(2, Collected())
+    try:
+        for name in ("a", "b", "c"):
+            pool.open(config(live_calibration, live_store, name=name), 0.0)
+        assert len(pool.worker_pids()) == 2
+        broken = tmp_path / "broken.toml"
+        broken.write_text("[cam_0]\nname = ")
+        with pytest.raises(ServiceError) as raised:
+            pool.open(config(broken, live_store, name="d"), 0.0)
+        assert str(broken) in str(raised.value)
+        with pytest.raises(InputError, match="no-such-store"):
+            pool.open(config(live_calibration, tmp_path / "no-such-store", name="e"), 0.0)
+    finally:
+        pids = pool.worker_pids()
+        pool.shutdown()
+    assert not any(Path(f"/proc/{pid}").exists() for pid in pids)
+
+
+def test_a_worker_that_dies_is_replaced_and_its_session_goes_on(
+    live_store: Path, live_calibration: Path, live_capture: SyntheticCapture
+) -> None:
+    collected = Collected()
+    pool = WorkerPipelines(1, collected)
+    try:
+        pool.open(config(live_calibration, live_store), 0.0)
+        first = pool.worker_pids()
+        pool.submit("stage", 0, live_capture.pixels[:, 0], 0.0, time.time())
+        os.kill(first[0], signal.SIGKILL)
+        deadline = time.time() + 60
+        while pool.restarts == 0:
+            assert time.time() < deadline, "no new worker"
+            time.sleep(0.05)
+        assert pool.worker_pids() != first
+        submit_all(pool, live_capture)
+        done = collected.wait_for(1 + live_capture.frames)
+    finally:
+        pool.shutdown()
+    # frame 0 was computed before the kill, or reported lost with the reason
+    assert done[0].output is not None or "exited with code -9" in (done[0].error or "")
+    after = done[1:]
+    assert all(d.output is not None for d in after), [d.error for d in after if d.error][:3]
