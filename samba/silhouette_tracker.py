@@ -1,0 +1,250 @@
+"""`SilhouetteTracker`: tree-based Bayesian filtering of a single camera's silhouettes over a
+`ShapeTree` (Okada, Stenger, Kondoh, Section 2).
+
+Each frame the observed silhouette is normalised (`samba.silhouette_view`) and the tree
+is evaluated once, coarse to fine: every top-level node, then the children of the
+nodes that survive on each level. A node's score is its log posterior, the log
+likelihood of Eq. 3 (a Gaussian in the silhouette distance `distance`, one of
+`samba.silhouette_distance.DISTANCES`, with a sigma per level) plus the log prior of
+Eq. 2: the previous frame's posterior (its best leaves and their weights) pushed through
+the first-order motion model of Eq. 8, a Gaussian per body part on joint positions (the
+trunk's in the world's axes, the limbs' and the head's in the body's own frame).
+Each part's Gaussian is floored `part_cap` nats below its peak: a limb that was lost can
+be found again wherever the silhouette shows it, while the trunk (whose cap is high)
+keeps the side of the body that faces the camera — a silhouette seen from the back is
+almost the one seen from the front, and only the motion model tells them apart. A node
+on an upper level stands for its leaves, so its part variances add the level's
+`spread`.
+Nodes more than `log_margin` below the best score of their level, or beyond the
+`keep` best, are pruned with their subtrees.
+
+The motion model is occlusion-aware (Eq. 9): a body part that is hidden in a
+previous leaf (its visible fraction below `occluded_below`) gets `occlusion_factor`
+times its standard deviation (the paper's m = 5), so it is free to jump to where it
+reappears. `occlusion_factor` = 1 is the plain model (the paper's DM1).
+
+A silhouette looks the same from the front and from the back, so the first frame (and
+the first after `reset`) needs a hint: it only considers poses whose front is within
+`start_tolerance` degrees of facing the camera (the player faces the screen when the
+game starts); from then on the motion model keeps the side.
+
+The estimate is the best leaf's pose moved from the tree's home to where the
+silhouette stands on the floor. Poses are (13, 3) meters in the world frame (+Y up).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import logsumexp
+
+from samba.errors import InputError
+from samba.shape_tree import LEVEL_SIZES, PART_JOINTS, ShapeTree
+from samba.silhouette_distance import DISTANCES, SilhouetteWeights, downsampled
+from samba.silhouette_runs import RowSums
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """The filter's parameters (see the module docstring).
+
+    `part_sigma` (parts,) meters: frame-to-frame standard deviation of a joint of each
+    body part (torso, head, arms, legs; `samba.body_model.PART_NAMES`), per coordinate.
+    `likelihood_sigma`: the least sigma of Eq. 3 on the 320-pixel-wide level, in units
+    of the distance (scaled with the image width for "core" and "normalised", whose
+    distances are in pixels); a noisy silhouette matches no node well, so sigma grows to
+    `relative_sigma` times the best distance of the level in the frame (a node 10 %
+    worse than the best then costs about 1 nat, however noisy the frame). On the upper
+    levels sigma is `upper_sigma_factor` times wider, as a node's silhouette only
+    stands for its leaves'. `keep` (per level): most nodes a level passes on.
+    """
+
+    distance: str = "normalised"
+    occlusion_factor: float = 5.0
+    occluded_below: float = 0.3
+    part_sigma: tuple[float, ...] = (0.05, 0.03, 0.08, 0.08, 0.06, 0.06)
+    likelihood_sigma: float = 0.01
+    relative_sigma: float = 0.3
+    upper_sigma_factor: float = 4.0
+    keep: tuple[int, ...] = (40, 120, 400)
+    log_margin: float = 12.0
+    part_cap: tuple[float, ...] = (40.0, 10.0, 10.0, 10.0, 10.0, 10.0)
+    start_tolerance: float = 60.0
+    posterior_size: int = 30
+
+    def __post_init__(self) -> None:
+        if self.distance not in DISTANCES:
+            raise InputError(
+                "distance", f"must be one of {', '.join(DISTANCES)}, got {self.distance!r}"
+            )
+        if not self.occlusion_factor >= 1.0:
+            raise InputError("occlusion_factor", f"must be >= 1, got {self.occlusion_factor}")
+        if len(self.part_sigma) != len(PART_JOINTS) or min(self.part_sigma) <= 0:
+            raise InputError("part_sigma", f"need {len(PART_JOINTS)} positive values")
+        if not self.likelihood_sigma > 0:
+            raise InputError("likelihood_sigma", f"must be > 0, got {self.likelihood_sigma}")
+        if len(self.part_cap) != len(PART_JOINTS) or not min(self.part_cap) > 0:
+            raise InputError("part_cap", f"need {len(PART_JOINTS)} positive values")
+        if len(self.keep) != len(LEVEL_SIZES) or min(self.keep) < 1:
+            raise InputError("keep", f"need {len(LEVEL_SIZES)} counts >= 1")
+        if not (self.posterior_size >= 1 and self.upper_sigma_factor >= 1):
+            raise InputError("posterior_size", "posterior_size and upper_sigma_factor >= 1")
+        if not (np.isfinite(self.log_margin) and self.log_margin > 0):
+            raise InputError("log_margin", f"must be finite and > 0, got {self.log_margin}")
+        if not (self.relative_sigma > 0 and 0 <= self.start_tolerance <= 180):
+            raise InputError("relative_sigma", "must be > 0 (start_tolerance in 0..180)")
+
+
+@dataclass(frozen=True)
+class SilhouetteEstimate:
+    """One tracked frame: `pose` (13, 3) world meters, the `leaf` it came from, its
+    silhouette `distance`, the `occluded` (parts,) bool flags of the leaf, `evaluated`
+    (tree nodes whose likelihood was computed) and `found` (False when the frame had
+    no silhouette and the previous pose is held)."""
+
+    pose: np.ndarray
+    leaf: int
+    distance: float
+    occluded: np.ndarray
+    evaluated: int
+    found: bool
+
+
+class SilhouetteTracker:
+    """Tracks one subject through silhouettes of `tree.view` (see the module docstring)."""
+
+    def __init__(self, tree: ShapeTree, settings: TrackerSettings | None = None) -> None:
+        self.tree = tree
+        self.settings = settings or TrackerSettings()
+        self._features = [_part_features(level.poses) for level in tree.levels]
+        away = np.abs(_facing_angles(tree.leaves.poses, tree.view.camera.center))
+        self._turned_away = [away > self.settings.start_tolerance]
+        for level in range(len(tree.levels) - 2, -1, -1):  # away when all leaves below are
+            below = self._turned_away[0]
+            facing = np.zeros(len(tree.levels[level]), dtype=bool)
+            facing[tree.levels[level + 1].parents[~below]] = True
+            self._turned_away.insert(0, ~facing)
+        self._sigma = np.asarray(self.settings.part_sigma, dtype=np.float64)
+        self._dims = np.array([3 * len(j) for j in PART_JOINTS], dtype=np.float64)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the past: the next frame is searched with a uniform prior."""
+        self._previous: np.ndarray | None = None  # leaf indices of the posterior
+        self._weights = np.zeros(0)
+        self._last: SilhouetteEstimate | None = None
+
+    def step(self, mask: np.ndarray) -> SilhouetteEstimate:
+        """Track one frame: `mask` (H, W) bool, the silhouette at the view's size. A frame
+        with no silhouette holds the previous pose (`found` False)."""
+        mask = np.asarray(mask)
+        if mask.shape != self.tree.view.size[::-1] or mask.dtype != bool:
+            raise InputError(
+                "silhouette",
+                f"expected a {self.tree.view.size[1]} x {self.tree.view.size[0]} bool mask, "
+                f"got {mask.shape} {mask.dtype}",
+            )
+        if not mask.any():
+            return self._hold(mask)
+        normalised, placement = self.tree.view.normalise(mask)
+        settings = self.settings
+        nodes = np.arange(len(self.tree.levels[0]))
+        evaluated = 0
+        for level, size in enumerate(LEVEL_SIZES):
+            if level:
+                nodes = self.tree.children(level - 1, nodes)
+            tree_level = self.tree.levels[level]
+            image = normalised if size == self.tree.view.size else downsampled(normalised, size)
+            weights = SilhouetteWeights.from_mask(image, settings.distance)
+            distances = tree_level.silhouettes.distances(RowSums.from_weights(weights), nodes)
+            evaluated += len(nodes)
+            sigma = settings.likelihood_sigma
+            if settings.distance != "xor":
+                sigma *= size[0] / LEVEL_SIZES[-1][0]
+            sigma = max(sigma, settings.relative_sigma * float(distances.min()))
+            if level < len(LEVEL_SIZES) - 1:
+                sigma *= settings.upper_sigma_factor
+            scores = -0.5 * (distances / sigma) ** 2
+            if level == len(LEVEL_SIZES) - 1 or self._previous is None:
+                scores = scores + self._log_prior(level, nodes)
+            order = np.argsort(scores)[::-1][: settings.keep[level]]
+            order = order[scores[order] >= scores[order[0]] - settings.log_margin]
+            nodes, scores, distances = nodes[order], scores[order], distances[order]
+        best = settings.posterior_size
+        self._previous = nodes[:best]
+        self._weights = np.exp(scores[:best] - logsumexp(scores[:best]))
+        leaves = self.tree.leaves
+        leaf = int(nodes[0])
+        shift = placement.floor + leaves.floor_offsets[leaf] - self.tree.view.home
+        shift[1] = 0.0
+        estimate = SilhouetteEstimate(
+            pose=leaves.poses[leaf].astype(np.float64) + shift,
+            leaf=leaf,
+            distance=float(distances[0]),
+            occluded=leaves.visibility[leaf] < settings.occluded_below,
+            evaluated=evaluated,
+            found=True,
+        )
+        self._last = estimate
+        return estimate
+
+    def track(self, masks: np.ndarray) -> list[SilhouetteEstimate]:
+        """`step` over silhouettes (n, H, W) bool, in order."""
+        return [self.step(mask) for mask in masks]
+
+    def _hold(self, mask: np.ndarray) -> SilhouetteEstimate:
+        if self._last is None:
+            raise InputError("silhouette", "the first frame has no silhouette to start from")
+        return SilhouetteEstimate(
+            self._last.pose, self._last.leaf, float("nan"), self._last.occluded, 0, False
+        )
+
+    def _log_prior(self, level: int, nodes: np.ndarray) -> np.ndarray:
+        """Log prior (k,) of `nodes` on `level`: the motion model applied to the previous
+        posterior, each part floored `part_cap` below its peak; with no past, 0 for the
+        nodes that face the camera and -inf for the others."""
+        settings = self.settings
+        if self._previous is None:
+            return np.where(self._turned_away[level][nodes], -np.inf, 0.0)
+        leaves = self.tree.leaves
+        occluded = leaves.visibility[self._previous] < settings.occluded_below
+        factor = np.where(occluded, settings.occlusion_factor, 1.0)
+        spread = self.tree.levels[level].spread
+        variance = (self._sigma * factor) ** 2 + spread**2  # (previous, parts)
+        peaks = np.log(self._weights) - 0.5 * (self._dims * np.log(2 * np.pi * variance)).sum(1)
+        log_density = np.broadcast_to(peaks, (len(nodes), len(peaks)))
+        mine, theirs = self._features[level], self._features[-1]
+        for part, cap in enumerate(settings.part_cap):
+            a = mine[part][nodes]
+            b = theirs[part][self._previous]
+            squared = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * a @ b.T
+            penalty = 0.5 * np.maximum(squared, 0.0) / variance[None, :, part]
+            log_density = log_density - np.minimum(penalty, cap)
+        return logsumexp(log_density, axis=1)
+
+
+def _part_features(poses: np.ndarray) -> list[np.ndarray]:
+    """Per body part, its joints (m, 3 * joints) in meters: the trunk's relative to the
+    hip midpoint in the world's axes (they carry the body's heading), every other part's
+    in the body's own frame (turned about the vertical so that the hip line lies along
+    +X), so that turning the whole body moves the trunk only."""
+    relative = poses.astype(np.float64) - poses[:, [7, 8]].mean(axis=1, keepdims=True)
+    left = relative[:, 7] - relative[:, 8]
+    heading = np.arctan2(left[:, 2], left[:, 0])
+    c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
+    body = relative.copy()
+    body[..., 0] = c * relative[..., 0] + s * relative[..., 2]
+    body[..., 2] = -s * relative[..., 0] + c * relative[..., 2]
+    frames = [relative] + [body] * (len(PART_JOINTS) - 1)
+    return [f[:, list(j)].reshape(len(poses), -1) for f, j in zip(frames, PART_JOINTS, strict=True)]
+
+
+def _facing_angles(poses: np.ndarray, camera: np.ndarray) -> np.ndarray:
+    """Degrees (m,) between each pose's front (seen from above) and the direction from
+    its hip midpoint to the `camera` centre (3,)."""
+    left = poses[:, 7] - poses[:, 8]
+    to_camera = camera - poses[:, [7, 8]].mean(axis=1)
+    front = np.arctan2(-left[:, 2], left[:, 0])
+    wanted = np.arctan2(to_camera[:, 0], to_camera[:, 2])
+    return (np.degrees(front - wanted) + 180.0) % 360.0 - 180.0
