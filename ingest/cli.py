@@ -9,6 +9,7 @@ import numpy as np
 
 from db.errors import QueryError
 from db.store import PoseStore
+from db.tree_cli import add_tree_command
 from ingest.batch import import_paths
 from ingest.bvh_take import BvhImportOptions
 from ingest.normalize import UNITS, UP_AXES
@@ -118,6 +119,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     p.add_argument("store")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(run=_stats)
+
+    add_tree_command(sub)
 
     p = sub.add_parser("query", help="k nearest poses to a marker observation")
     p.add_argument("store")

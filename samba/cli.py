@@ -17,13 +17,20 @@ from collections.abc import Sequence
 from samba.errors import SambaError
 
 AREAS: dict[str, tuple[str, str]] = {
-    "db": ("ingest.cli", "pose database: init, import, ls, show, label, rm, verify, stats, query"),
+    "db": (
+        "ingest.cli",
+        "pose database: init, import, ls, show, label, rm, verify, stats, tree, query",
+    ),
     "eval": ("samba.eval_cli", "accuracy and speed of every reconstruction method on BVH takes"),
     "calibrate": ("samba.calibrate_cli", "calibrate cameras from images or videos of a board"),
     "export": ("export.cli", "retarget takes to a humanoid avatar and write USD, glTF or BVH"),
     "serve": ("service.serve_cli", "live capture server: packets in; VMC, viewer, takes out"),
     "demo": ("service.demo", "a live capture end to end: server, two camera nodes, take, export"),
     "node": ("service.node_cli", "camera node: track the 8 markers in frames and send them by UDP"),
+    "track-video": (
+        "service.track_video_cli",
+        "markerless capture from one camera: silhouettes tracked over the shape tree, as a take",
+    ),
 }
 """Subcommand -> (module with `register(parser)`, one-line help)."""
 

@@ -290,7 +290,10 @@ def _distance_to(pixels: np.ndarray, mask_size: int = cv2.DIST_MASK_PRECISE) -> 
     """Euclidean distance (H, W) float32, in pixels, of every pixel to the nearest True
     pixel of `pixels` (H, W) bool; zero on them. Pixels beyond the image border are
     never nearest."""
-    return cv2.distanceTransform((~pixels).astype(np.uint8), cv2.DIST_L2, mask_size)
+    distance = cv2.distanceTransform((~pixels).astype(np.uint8), cv2.DIST_L2, mask_size)
+    # OpenCV's precise transform varies in the last bits from call to call; rounded, a
+    # silhouette always gets the same skeleton and weights.
+    return np.round(distance, 4)
 
 
 def _ridge(depth: np.ndarray) -> np.ndarray:

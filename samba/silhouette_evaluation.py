@@ -24,10 +24,12 @@ from threadpoolctl import threadpool_limits
 
 from samba.body_model import scaled_to
 from samba.shape_tree import ShapeTree
+from samba.silhouette_distance import DISTANCES
 from samba.silhouette_extraction import clean_silhouette
 from samba.silhouette_render import noisy_silhouettes, render_silhouettes
 from samba.silhouette_tracker import SilhouetteTracker, TrackerSettings
 from samba.silhouette_view import SilhouetteView
+from samba.synthetic import generate
 
 FAILURE_CM = 15.0
 """A frame whose MPJPE (cm, tibia 45 cm) exceeds this is a tracking failure."""
@@ -127,3 +129,72 @@ def track_take(
 
 def _root_relative(poses: np.ndarray) -> np.ndarray:
     return poses - poses[:, [7, 8]].mean(axis=1, keepdims=True)
+
+
+ARM_JOINTS = (3, 4, 5, 6)
+"""Elbows and wrists: the joints the arm-swing experiment scores."""
+ARM_FAIL_CM = 20.0
+ARM_ERROR_CM = 10.0
+
+
+@dataclass(frozen=True)
+class ArmSwingOutcome:
+    """The arm-swing experiment for one distance and motion model: how many sequences
+    `failed` (the arms more than `ARM_FAIL_CM` off in over a fifth of the frames: the
+    track was lost), were tracked with an `error` (arm joints more than `ARM_ERROR_CM`
+    off on average) or `succeeded`, and the mean arm error in cm."""
+
+    distance: str
+    occlusion_factor: float
+    failed: int
+    error: int
+    succeeded: int
+    arm_error_cm: float
+
+
+def arm_swing_experiment(
+    tree: ShapeTree,
+    sequences: int = 24,
+    noise: float = 0.5,
+    seed: int = 2000,
+    seconds: float = 4.0,
+    fps: float = 15.0,
+) -> list[ArmSwingOutcome]:
+    """The paper's Figure 4 experiment: `sequences` held-out arm swings seen from the
+    side (every other one from the left), where the far arm passes behind the body,
+    tracked with each distance of `DISTANCES` and the plain (m = 1) and the
+    occlusion-aware (m = 5) motion model."""
+    takes = [
+        staged(
+            generate("arm_swing", seconds, fps, seed + k).poses.astype(np.float64),
+            tree.view,
+            tree.body.height,
+            turn_deg=90.0 if k % 2 else -90.0,
+        )
+        for k in range(sequences)
+    ]
+    outcomes = []
+    for distance in DISTANCES:
+        for factor in (1.0, 5.0):
+            settings = TrackerSettings(distance=distance, occlusion_factor=factor)
+            arms = np.array(
+                [
+                    track_take("arm_swing", poses, tree, settings, noise, seed=k)
+                    .errors[:, list(ARM_JOINTS)]
+                    .mean(axis=1)
+                    for k, poses in enumerate(takes)
+                ]
+            )
+            failed = np.mean(arms > ARM_FAIL_CM, axis=1) > 0.2
+            error = ~failed & (arms.mean(axis=1) > ARM_ERROR_CM)
+            outcomes.append(
+                ArmSwingOutcome(
+                    distance,
+                    factor,
+                    int(failed.sum()),
+                    int(error.sum()),
+                    int(sequences - failed.sum() - error.sum()),
+                    float(arms.mean()),
+                )
+            )
+    return outcomes

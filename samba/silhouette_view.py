@@ -36,8 +36,12 @@ VIEW_SIZE = (320, 240)
 CORE_FRACTION = 0.9
 """The core is the mean column of the pixels at least this fraction of the deepest
 pixel's distance from the outline (steadier than the single deepest pixel)."""
+HOME_AIM_HEIGHT = 0.9
+"""A camera is taken to aim at the middle of the subject: by default the home point is
+under the point where the optical axis is this many meters above the floor."""
 HOME_DISTANCE = 3.0
-"""Meters from the camera to the home point when the optical axis misses the floor."""
+"""Meters from the camera to the home point when the optical axis never passes at
+`HOME_AIM_HEIGHT` in front of the camera."""
 
 
 @dataclass(frozen=True)
@@ -53,9 +57,10 @@ class Placement:
 class SilhouetteView:
     """A camera, resampled to `size`, watching a subject whose home is a floor point.
 
-    `home` (3,) meters defaults to where the optical axis meets the floor (or the floor
-    point `HOME_DISTANCE` ahead when the camera looks level or up). `InputError` when
-    the camera cannot see the floor around home.
+    `home` (3,) meters defaults to the floor point under the optical axis at
+    `HOME_AIM_HEIGHT` (or the one `HOME_DISTANCE` ahead when the axis stays level at
+    that height or moves away from it). `InputError` when the camera cannot see the
+    floor around home.
     """
 
     def __init__(
@@ -77,8 +82,9 @@ class SilhouetteView:
     def _default_home(self) -> np.ndarray:
         centre = self.camera.center
         axis = self.camera.rotation_matrix[2]
-        if axis[1] < -0.05:
-            return centre - axis * centre[1] / axis[1]
+        rise = HOME_AIM_HEIGHT - centre[1]
+        if abs(axis[1]) > 1e-6 and rise / axis[1] > 0:
+            return centre + axis * rise / axis[1]
         ahead = np.array([axis[0], 0.0, axis[2]])
         return centre + ahead / np.linalg.norm(ahead) * HOME_DISTANCE
 

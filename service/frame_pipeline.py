@@ -27,7 +27,7 @@ from export.live_retarget import LiveRetarget
 from samba.calibration_file import read_calibration
 from samba.methods import method
 from samba.reconstruction import PoseEstimate
-from samba.skeleton import mirror_poses
+from samba.skeleton import N_MARKERS, mirror_poses
 from samba.triangulation import Triangulation
 from service.session_config import SessionConfig
 from service.vmc import VmcSender, frame_bundles, unity_values
@@ -46,8 +46,34 @@ class FrameOutput:
     vmc_errors: int
 
 
+class AvatarStream:
+    """A session's avatar output: retargets each pose (13, 3) m to the avatar of
+    `config.avatar` (default: the built-in humanoid) and sends it as VMC bundles to
+    `config.vmc`, time stamped in seconds from `clock_zero`."""
+
+    def __init__(self, config: SessionConfig, clock_zero: float) -> None:
+        self.clock_zero = clock_zero
+        self.rig = (
+            HumanoidRig.from_body() if config.avatar is None else read_avatar_rig(config.avatar)
+        )
+        self.retarget = LiveRetarget(self.rig)
+        self.vmc = VmcSender(config.vmc)
+
+    def send(self, pose: np.ndarray, frame_time: float) -> int:
+        """Send the avatar in `pose` captured at `frame_time` (s); returns the VMC
+        datagrams the network has refused so far."""
+        rotations, root = self.retarget.step(pose)
+        positions, unity_rotations = unity_values(root, rotations, self.rig)
+        self.vmc.send(frame_bundles(positions, unity_rotations, frame_time - self.clock_zero))
+        return sum(self.vmc.errors.values())
+
+    def close(self) -> None:
+        """Close the VMC socket."""
+        self.vmc.close()
+
+
 class FramePipeline:
-    """One session's per-frame computation; see the module docstring.
+    """One marker session's per-frame computation; see the module docstring.
 
     Opens the calibration and the pose database (read only) and the VMC socket; raises
     `InputError` subclasses naming the file when one cannot be used. VMC time stamps
@@ -55,8 +81,8 @@ class FramePipeline:
     """
 
     def __init__(self, config: SessionConfig, clock_zero: float) -> None:
+        assert config.calibration is not None and config.database is not None
         self.config = config
-        self.clock_zero = clock_zero
         self.cameras = read_calibration(config.calibration)
         self._projections = self.cameras.projections
         chosen = method(config.method)
@@ -68,11 +94,7 @@ class FramePipeline:
                 np.concatenate([poses, mirror_poses(poses)]), scale_by_tibia=store.scale_by_tibia
             )
         self.reconstructor = chosen.build(index)
-        self.rig = (
-            HumanoidRig.from_body() if config.avatar is None else read_avatar_rig(config.avatar)
-        )
-        self.retarget = LiveRetarget(self.rig)
-        self.vmc = VmcSender(config.vmc)
+        self.avatar = AvatarStream(config, clock_zero)
 
     @property
     def database_poses(self) -> int:
@@ -89,12 +111,39 @@ class FramePipeline:
         )
         markers = views.points
         estimate = self.reconstructor.step(markers)
-        rotations, root = self.retarget.step(estimate.pose)
-        positions, unity_rotations = unity_values(root, rotations, self.rig)
-        self.vmc.send(frame_bundles(positions, unity_rotations, frame_time - self.clock_zero))
-        latency = time.time() - last_arrival
-        return FrameOutput(markers, estimate, latency, sum(self.vmc.errors.values()))
+        errors = self.avatar.send(estimate.pose, frame_time)
+        return FrameOutput(markers, estimate, time.time() - last_arrival, errors)
 
     def close(self) -> None:
         """Close the VMC socket."""
-        self.vmc.close()
+        self.avatar.close()
+
+
+class PosePipeline:
+    """One pose session's per-frame computation: the markerless node tracked the body
+    already, so each pose (13, 3) m only goes to the avatar (`AvatarStream`)."""
+
+    database_poses = 0
+    """A pose session searches no database."""
+
+    def __init__(self, config: SessionConfig, clock_zero: float) -> None:
+        self.avatar = AvatarStream(config, clock_zero)
+
+    def process(self, pose: np.ndarray, frame_time: float, last_arrival: float) -> FrameOutput:
+        """Send the node's `pose` (13, 3) m captured at `frame_time`, complete at
+        `last_arrival` (s); its markers are all missing (NaN)."""
+        estimate = PoseEstimate(np.asarray(pose, dtype=np.float64), 0.0, 0, True, False)
+        errors = self.avatar.send(estimate.pose, frame_time)
+        markers = np.full((N_MARKERS, 3), np.nan)
+        return FrameOutput(markers, estimate, time.time() - last_arrival, errors)
+
+    def close(self) -> None:
+        """Close the VMC socket."""
+        self.avatar.close()
+
+
+def open_pipeline(config: SessionConfig, clock_zero: float) -> FramePipeline | PosePipeline:
+    """The pipeline of a session's `input` kind."""
+    if config.input == "poses":
+        return PosePipeline(config, clock_zero)
+    return FramePipeline(config, clock_zero)

@@ -59,7 +59,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 
-from service.packet import MarkerPacket, sequence_delta
+from service.packet import Packet, sequence_delta
 
 RECENT_PACKETS = 256
 """(sequence, timestamp) pairs remembered per camera to spot duplicates and restarts."""
@@ -79,7 +79,7 @@ class SyncedFrame:
     """
 
     time: float
-    packets: Mapping[int, MarkerPacket]
+    packets: Mapping[int, Packet]
     complete: bool
     last_arrival: float
 
@@ -107,7 +107,7 @@ class SyncCounts:
 
 @dataclass
 class _Member:
-    packet: MarkerPacket
+    packet: Packet
     aligned: float
     arrival: float
 
@@ -127,7 +127,7 @@ class _Camera:
         self.newest: tuple[int, float] | None = None
         self.clock: deque[tuple[float, float]] = deque()
 
-    def went_back(self, packet: MarkerPacket) -> bool:
+    def went_back(self, packet: Packet) -> bool:
         """Whether the sequence is older than the newest packet's but the timestamp newer."""
         if self.newest is None:
             return False
@@ -140,7 +140,7 @@ class _Camera:
         self.newest = None
         self.clock.clear()
 
-    def remember(self, packet: MarkerPacket) -> None:
+    def remember(self, packet: Packet) -> None:
         """Record the packet's (sequence, timestamp); it is the newest if both are ahead."""
         self.recent[packet.sequence] = packet.timestamp
         if len(self.recent) > RECENT_PACKETS:
@@ -217,7 +217,7 @@ class FrameSync:
         self._last_time = -math.inf
         self.counts = SyncCounts()
 
-    def add(self, packet: MarkerPacket, arrival: float) -> list[SyncedFrame]:
+    def add(self, packet: Packet, arrival: float) -> list[SyncedFrame]:
         """Offer one packet that arrived at server time `arrival` (s, monotonic).
 
         Returns the frames this resolves, oldest first: the frame it completes when no
@@ -351,7 +351,7 @@ def _reference(frame: _OpenFrame) -> float:
     return frame.reference
 
 
-def _same(a: MarkerPacket, b: MarkerPacket) -> bool:
+def _same(a: Packet, b: Packet) -> bool:
     return a.sequence == b.sequence and a.timestamp == b.timestamp
 
 

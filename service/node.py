@@ -28,11 +28,11 @@ from __future__ import annotations
 import math
 import socket
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Literal, TextIO
+from typing import Literal, Protocol, TextIO
 
 import cv2
 import numpy as np
@@ -45,9 +45,9 @@ from samba.lead_in import LeadIn, standing_lead_in
 from samba.marker_detection import detect_markers, static_mask
 from samba.marker_render import RenderOptions, film_empty_stage, render_camera
 from samba.marker_tracking import MarkerTracker
-from samba.skeleton import N_MARKERS
+from samba.skeleton import N_JOINTS, N_MARKERS
 from samba.synthetic import generate
-from service.packet import MarkerPacket, encode
+from service.packet import MarkerPacket, PosePacket, encode
 
 DEFAULT_PORT = 9870
 """The UDP port the server (`samba serve`) listens on for camera packets by default."""
@@ -99,6 +99,18 @@ class SubjectStart:
         return cls(x, z, lead_in.heading_deg, lead_in.height)
 
 
+class Node(Protocol):
+    """What `run_node` drives: a frame (H, W) or (H, W, 3) in, the values to send out
+    ((8, 2) markers, (13, 3) pose, or None: nothing yet); `MISSING` says what its
+    summary's missing rate counts."""
+
+    MISSING: str
+
+    def restart(self) -> None: ...
+
+    def process(self, frame: np.ndarray, name: str = "frame") -> np.ndarray | None: ...
+
+
 class CameraNode:
     """One camera's frame-to-markers pipeline: detection, then the 8-label tracker.
 
@@ -120,6 +132,9 @@ class CameraNode:
         self.mask = mask
         self.threshold = threshold
         self.restart()
+
+    MISSING = "markers missing"
+    """What `NodeSummary.missing_rate` counts for this node: (frame, marker) pairs."""
 
     def restart(self) -> None:
         """Start the labels again from the standard pose at `start` (a new take)."""
@@ -183,12 +198,13 @@ class PacketSender:
             self._socket.close()
             raise InputError(f"{host}:{port}", f"cannot reach the server: {exc}") from None
 
-    def send(self, sequence: int, timestamp: float, markers: np.ndarray) -> int:
-        """Send one frame: `sequence` 0..2^32 - 1, capture `timestamp` seconds, `markers`
-        (8, 2) pixels, NaN = missing. Returns the bytes sent, 0 if the send failed."""
-        data = encode(
-            MarkerPacket(self.camera, sequence, timestamp, markers, self.session), self.key
-        )
+    def send(self, sequence: int, timestamp: float, values: np.ndarray) -> int:
+        """Send one frame: `sequence` 0..2^32 - 1, capture `timestamp` seconds, and
+        either the markers (8, 2) pixels, NaN = missing (a `MarkerPacket`) or a pose
+        (13, 3) world meters (a `PosePacket`, from a markerless node). Returns the bytes
+        sent, 0 if the send failed."""
+        kind = PosePacket if np.shape(values) == (N_JOINTS, 3) else MarkerPacket
+        data = encode(kind(self.camera, sequence, timestamp, values, self.session), self.key)
         try:
             sent = self._socket.send(data)
         except OSError as exc:
@@ -343,18 +359,33 @@ class SyntheticFeed:
 
     def captures(self) -> Iterator[Capture]:
         """The frames stamped with their grid times, in order (endless when looping)."""
-        period = 1.0 / self.fps
-        index = 0
-        while True:
-            for number, frame in enumerate(self.frames()):
-                at = self.start_at + index * period
-                if self.pace:
-                    _sleep_until(at)
-                deadline = at + period if self.pace else None
-                yield Capture(frame, at, deadline, number == 0, f"{self.name} frame {index}")
-                index += 1
-            if not self.loop:
-                return
+        return grid_captures(self.frames, self.fps, self.start_at, self.pace, self.loop, self.name)
+
+
+def grid_captures(
+    frames: Callable[[], Iterable[np.ndarray]],
+    fps: float,
+    start_at: float,
+    pace: bool,
+    loop: bool,
+    name: str,
+) -> Iterator[Capture]:
+    """Captures of the frames of `frames()` on a wall-clock grid: frame i (counted over
+    repetitions when looping) is captured at `start_at + i / fps` UNIX seconds and
+    stamped with exactly that time; with `pace` it waits until then, and its deadline is
+    the next grid time. `frames()` is called again for every repetition."""
+    period = 1.0 / fps
+    index = 0
+    while True:
+        for number, frame in enumerate(frames()):
+            at = start_at + index * period
+            if pace:
+                _sleep_until(at)
+            deadline = at + period if pace else None
+            yield Capture(frame, at, deadline, number == 0, f"{name} frame {index}")
+            index += 1
+        if not loop:
+            return
 
 
 @dataclass(frozen=True)
@@ -363,7 +394,8 @@ class NodeSummary:
     (frame, marker) reported missing, `send_errors` packets that could not be sent,
     `late_frames` frames whose packet went out after their deadline (of `paced_frames`
     that had one), `seconds` of wall time, `process_ms` mean detection + tracking time
-    per frame, `interrupted` whether Ctrl-C ended it."""
+    per frame, `interrupted` whether Ctrl-C ended it, `missing_what` what the missing
+    rate counts, for people."""
 
     camera: int
     frames: int
@@ -374,6 +406,7 @@ class NodeSummary:
     seconds: float
     process_ms: float
     interrupted: bool
+    missing_what: str = "markers missing"
 
     @property
     def kept_up(self) -> bool:
@@ -393,13 +426,13 @@ class NodeSummary:
         ended = "interrupted; " if self.interrupted else ""
         return (
             f"camera {self.camera}: {ended}{self.frames} frames in {self.seconds:.1f} s, "
-            f"{100 * self.missing_rate:.1f}% markers missing, {self.send_errors} send errors, "
+            f"{100 * self.missing_rate:.1f}% {self.missing_what}, {self.send_errors} send errors, "
             f"{pace}, {self.process_ms:.2f} ms per frame detecting and tracking"
         )
 
 
 def run_node(
-    node: CameraNode,
+    node: Node,
     captures: Iterable[Capture],
     sender: PacketSender,
     start_sequence: int = 0,
@@ -407,23 +440,26 @@ def run_node(
 ) -> NodeSummary:
     """Process and send every capture until the feed ends or Ctrl-C; returns the summary.
 
-    Packets carry sequence numbers from `start_sequence`, one per frame, wrapping from
-    2^32 - 1 to 0. The node's tracker restarts on every capture marked `first`. With a
+    `node` is a `CameraNode` (markers) or a `service.silhouette_node.SilhouetteNode`
+    (poses; a frame it has no pose for yet is counted, not sent). Packets carry
+    sequence numbers from `start_sequence`, one per frame, wrapping from 2^32 - 1 to 0.
+    The node's tracker restarts on every capture marked `first`. With a
     `status` stream, a one-line status goes there every `STATUS_SECONDS`. InputError
     from the feed or the frames (wrong size, unreadable) propagates.
     """
     sequence = start_sequence % _SEQUENCE_MODULUS
-    tally = _Tally(sender)
+    tally = _Tally(sender, node.MISSING)
     interrupted = False
     try:
         for capture in captures:
             if capture.first:
                 node.restart()
             tic = time.perf_counter()
-            markers = node.process(capture.frame, capture.name)
+            values = node.process(capture.frame, capture.name)
             tally.process_s += time.perf_counter() - tic
-            sender.send(sequence, capture.timestamp, markers)
-            tally.count(markers, capture.deadline)
+            if values is not None:
+                sender.send(sequence, capture.timestamp, values)
+            tally.count(values, capture.deadline)
             sequence = (sequence + 1) % _SEQUENCE_MODULUS
             if status is not None and tally.status_due():
                 print(tally.status_line(), file=status, flush=True)
@@ -435,20 +471,22 @@ def run_node(
 class _Tally:
     """The running counts of a node run, and the status lines and summary made of them."""
 
-    def __init__(self, sender: PacketSender) -> None:
+    def __init__(self, sender: PacketSender, missing_what: str) -> None:
         self.sender = sender
+        self.missing_what = missing_what
         self.began = time.monotonic()
         self.frames = self.missing = self.late = self.paced = 0
         self.process_s = 0.0
         self._mark = (self.began, 0, 0)
         """Clock, frames and send errors at the last status line (or the first frame)."""
 
-    def count(self, markers: np.ndarray, deadline: float | None) -> None:
-        """Count one frame sent now: its markers (8, 2) and deadline (None: unpaced)."""
+    def count(self, values: np.ndarray | None, deadline: float | None) -> None:
+        """Count one frame sent now: its markers (8, 2) or pose (13, 3), None when
+        nothing was sent, and its deadline (None: unpaced)."""
         if self.frames == 0:
             self._mark = (time.monotonic(), 0, self.sender.errors)
         self.frames += 1
-        self.missing += int(np.isnan(markers[:, 0]).sum())
+        self.missing += N_MARKERS if values is None else int(np.isnan(values[:, 0]).sum())
         if deadline is not None:
             self.paced += 1
             self.late += time.time() > deadline
@@ -481,6 +519,7 @@ class _Tally:
             seconds=time.monotonic() - self.began,
             process_ms=1000.0 * self.process_s / self.frames if self.frames else math.nan,
             interrupted=interrupted,
+            missing_what=self.missing_what,
         )
 
 

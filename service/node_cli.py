@@ -2,7 +2,10 @@
 
 Reads frames from exactly one source (a video file, an image folder, a webcam or one
 camera of the synthetic rig), detects and tracks the 8 markers and sends one UDP packet
-per frame to the server. `--camera N` is both the packet's camera id and the camera's
+per frame to the server. With `--mode silhouette` the node is markerless: one ordinary
+camera, the subject's silhouette tracked over the shape tree of `--db`
+(`service.silhouette_node`), one pose packet per frame to a session whose input is
+"poses". `--camera N` is both the packet's camera id and the camera's
 place in the calibration file: the N-th camera table of the file, counted from 0.
 The run ends when the source does (never with `--loop` or a webcam) or on Ctrl-C, and
 prints a one-line summary.
@@ -12,17 +15,22 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import sys
 import time
 from collections.abc import Iterator
 
 import numpy as np
 
+from db.tree_cli import chosen_body, chosen_home, tree_for
+from samba.body_model import KINDS
 from samba.calibration_file import read_calibration
 from samba.camera import Camera
 from samba.cli_arguments import address, finite_float, natural, positive_float
 from samba.errors import InputError
 from samba.frame_source import open_frames
+from samba.silhouette_extraction import SilhouetteExtractor
+from samba.silhouette_view import SilhouetteView
 from samba.skeleton import N_MARKERS
 from samba.synthetic import MOTIONS
 from service.node import (
@@ -39,6 +47,7 @@ from service.node import (
     synthetic_lead_in,
 )
 from service.packet import MIN_KEY_BYTES, MarkerPacket, read_key_file
+from service.silhouette_node import SilhouetteNode, SyntheticStageFeed
 
 START_DELAY_SECONDS = 0.5
 """How far ahead of now the synthetic capture starts when `--start-at` is not given."""
@@ -57,8 +66,17 @@ _SCOPES: dict[str, tuple[str, ...]] = {
     "height": ("video", "images", "webcam"),
     "no_pace": ("video", "images", "synthetic"),
     "loop": ("video", "images", "synthetic"),
+    "background": ("video", "images", "webcam"),
+    "empty_frames": ("video", "images", "webcam"),
 }
 """Flags that apply to some sources only -> those sources."""
+_MODE_FLAGS: dict[str, tuple[str, ...]] = {
+    "markers": ("threshold", "start_x", "start_z", "heading"),
+    "silhouette": ("db", "tree", "body", "kind", "home", "background", "empty_frames"),
+}
+"""Flags of one mode only."""
+EMPTY_STAGE_FRAMES = 10
+"""Frames of the synthetic stage the silhouette node learns the background from."""
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -173,6 +191,26 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="fixed marker threshold, grey level (default: automatic per frame)",
     )
     parser.add_argument(
+        "--mode",
+        choices=("markers", "silhouette"),
+        default="markers",
+        help="markers (default) or silhouette: markerless, one camera, pose packets",
+    )
+    markerless = parser.add_argument_group(
+        "silhouette mode (the subject's --height picks the body model)"
+    )
+    markerless.add_argument("--db", metavar="STORE", help="pose store holding the shape tree")
+    markerless.add_argument("--tree", help="shape tree name in the store (default CAMERA-BODY)")
+    markerless.add_argument("--body", help="body model name (default: nearest to --height)")
+    markerless.add_argument("--kind", choices=KINDS, help="men, women or children")
+    markerless.add_argument("--home", metavar="X,Z", help="floor point (m) the subject stands on")
+    markerless.add_argument(
+        "--background", metavar="PATH", help="video or images of the empty stage"
+    )
+    markerless.add_argument(
+        "--empty-frames", type=natural, metavar="N", help="the first N frames show the empty stage"
+    )
+    parser.add_argument(
         "--verbose",
         action="store_true",
         help="print a status line to stderr every few seconds",
@@ -192,7 +230,10 @@ def _run(args: argparse.Namespace) -> int:
     key = read_key_file(args.key_file) if args.key_file is not None else None
     host, port = args.server
     with PacketSender(host, port, args.camera, args.session, key) as sender:
-        node, captures = _open_source(args, source, camera)
+        if args.mode == "silhouette":
+            node, captures = _open_silhouette_source(args, source, camera)
+        else:
+            node, captures = _open_source(args, source, camera)
         with contextlib.closing(captures):
             summary = run_node(
                 node,
@@ -217,6 +258,16 @@ def _source_of(args: argparse.Namespace) -> str:
         if getattr(args, name) is not None and source not in sources:
             flag = "--" + name.replace("_", "-")
             raise InputError(flag, f"does not apply to --{source}")
+    for mode, names in _MODE_FLAGS.items():
+        for name in names:
+            if getattr(args, name) is not None and args.mode != mode:
+                flag = "--" + name.replace("_", "-")
+                raise InputError(flag, f"applies to --mode {mode} only")
+    if args.mode == "silhouette":
+        if args.db is None:
+            raise InputError("--mode silhouette", "needs --db STORE (its shape tree)")
+        if source != "synthetic" and (args.background is None) == (args.empty_frames is None):
+            raise InputError("--mode silhouette", "give --background PATH or --empty-frames N")
     return source
 
 
@@ -254,6 +305,42 @@ def _open_source(
     if source == "images" and frames.is_video:
         raise InputError(args.images, "is a file: use --video")
     return node, FileFeed(frames, args.fps, pace, loop).captures()
+
+
+def _open_silhouette_source(
+    args: argparse.Namespace, source: str, camera: Camera
+) -> tuple[SilhouetteNode, Iterator[Capture]]:
+    """The markerless node and the capture feed of the chosen source, opened."""
+    view, body = SilhouetteView(camera, chosen_home(args)), chosen_body(args)
+    tree = tree_for(args.db, args.tree, view, body)
+    pace, loop = not args.no_pace, bool(args.loop)
+    if source == "synthetic":
+        fps = args.fps or DEFAULT_FPS
+        start_at = args.start_at if args.start_at is not None else time.time() + START_DELAY_SECONDS
+        feed = SyntheticStageFeed(
+            camera,
+            tree,
+            body,
+            args.synthetic,
+            args.seconds or DEFAULT_SYNTHETIC_SECONDS,
+            fps,
+            args.seed or 0,
+            start_at,
+            pace,
+            loop,
+        )
+        extractor = SilhouetteExtractor.learn(feed.empty_frames(EMPTY_STAGE_FRAMES))
+        return SilhouetteNode(tree, extractor), feed.captures()
+    if source == "webcam":
+        captures = WebcamFeed(args.webcam, args.fps).captures()
+    else:
+        frames = open_frames(args.video if source == "video" else args.images)
+        captures = FileFeed(frames, args.fps, pace, loop).captures()
+    if args.background is not None:
+        empty = [frame for _, frame in open_frames(args.background).frames()]
+    else:
+        empty = [capture.frame for capture in itertools.islice(captures, args.empty_frames)]
+    return SilhouetteNode(tree, SilhouetteExtractor.learn(empty)), captures
 
 
 def _camera_id(text: str) -> int:

@@ -5,19 +5,27 @@ A camera node sends, for each frame, the 8 labelled marker positions its tracker
 and back; `decode` raises `PacketError` (and nothing else) on any datagram it drops,
 with a `reason` from a small fixed set the server counts drops by.
 
-Layout (version 1, little-endian, no padding; 100 bytes, 116 with the tag):
+A markerless node (`samba node --mode silhouette`) tracks the whole body itself and
+sends a `PosePacket` instead: the same header with flags bit 1 set, and the 13 joints
+(world meters, +Y up, `samba.skeleton.JOINT_NAMES` order) where the markers would be.
+
+Layout (version 1, little-endian, no padding; 100 bytes, 116 with the tag; a pose packet
+192 and 208):
 
 | offset | size | type | field | meaning |
 |---:|---:|---|---|---|
 | 0 | 4 | bytes | magic | `b"SMBA"` |
 | 4 | 1 | uint8 | version | 1 |
-| 5 | 1 | uint8 | flags | bit 0: a tag follows the markers; bits 1-7 are 0 |
+| 5 | 1 | uint8 | flags | bit 0: a tag ends the packet; bit 1: a pose packet; bits 2-7: 0 |
 | 6 | 2 | uint16 | camera | camera id, 0..65535 |
 | 8 | 4 | uint32 | sequence | frame counter of this camera, wraps from 2^32 - 1 to 0 |
 | 12 | 8 | float64 | timestamp | capture time of the frame, seconds on the node's clock |
 | 20 | 16 | bytes | session | ASCII id `[A-Za-z0-9._-]`, 0..16 characters, NUL-padded |
 | 36 | 64 | float32[8][2] | markers | (u, v) pixels per marker in marker order, NaN = missing |
 | 100 | 16 | bytes | tag | only if flags bit 0: HMAC-SHA256(key, bytes 0..99), first 16 bytes |
+
+In a pose packet the 156 bytes from offset 36 are the pose, float32[13][3], all finite,
+and the tag (at offset 192) covers bytes 0..191.
 
 Markers follow `samba.skeleton.MARKER_NAMES` (l/r shoulder, l/r wrist, l/r knee, l/r foot)
 with pixels in the OpenCV convention. A missing marker has both coordinates NaN; a
@@ -53,13 +61,15 @@ from pathlib import Path
 
 import numpy as np
 
-from samba.skeleton import N_MARKERS
+from samba.skeleton import N_JOINTS, N_MARKERS
 from service.errors import PacketError, ServiceError
 
 MAGIC = b"SMBA"
 VERSION = 1
 FLAG_TAG = 0x01
-"""Flags bit: an HMAC tag follows the markers."""
+"""Flags bit: an HMAC tag ends the packet."""
+FLAG_POSE = 0x02
+"""Flags bit: a `PosePacket`, 13 joints where a `MarkerPacket` has its markers."""
 TAG_BYTES = 16
 """Length of the truncated HMAC-SHA256 tag."""
 SESSION_BYTES = 16
@@ -74,6 +84,8 @@ HEADER_BYTES = _HEADER.size
 """Offset of the markers: 36."""
 BODY_BYTES = HEADER_BYTES + N_MARKERS * 2 * _MARKER_DTYPE.itemsize
 """Length of an untagged packet and offset of the tag: 100."""
+POSE_BODY_BYTES = HEADER_BYTES + N_JOINTS * 3 * _MARKER_DTYPE.itemsize
+"""Length of an untagged pose packet: 192."""
 _PREFIX_BYTES = 6
 """Magic, version and flags: what `decode` needs to know the expected length."""
 _SESSION = re.compile(rf"[A-Za-z0-9._-]{{0,{SESSION_BYTES}}}")
@@ -103,21 +115,12 @@ class MarkerPacket:
             raise ValueError(f"markers have shape {markers.shape}, expected ({N_MARKERS}, 2)")
         markers.flags.writeable = False
         object.__setattr__(self, "markers", markers)
-        if not _is_int(self.camera) or not 0 <= self.camera <= 0xFFFF:
-            raise ValueError(f"camera {self.camera!r} is not an integer in 0..65535")
-        if not _is_int(self.sequence) or not 0 <= self.sequence < _SEQUENCE_MODULUS:
-            raise ValueError(f"sequence {self.sequence!r} is not an integer in 0..2^32 - 1")
-        if not _is_real(self.timestamp) or not math.isfinite(self.timestamp):
-            raise ValueError(f"timestamp {self.timestamp!r} is not a finite number")
+        _check_header(self.camera, self.sequence, self.timestamp, self.session)
         missing = np.isnan(markers)
         if not (np.isfinite(markers) | missing).all():
             raise ValueError("a marker coordinate is infinite")
         if (missing[:, 0] != missing[:, 1]).any():
             raise ValueError("a marker has one coordinate NaN and the other not")
-        if not isinstance(self.session, str) or not _SESSION.fullmatch(self.session):
-            raise ValueError(
-                f"session {self.session!r} is not 0..{SESSION_BYTES} characters of [A-Za-z0-9._-]"
-            )
 
     def __eq__(self, other: object) -> bool:
         """All fields equal; markers compared with NaN equal to NaN."""
@@ -131,25 +134,66 @@ class MarkerPacket:
         ) and np.array_equal(self.markers, other.markers, equal_nan=True)
 
 
-def encode(packet: MarkerPacket, key: bytes | None = None) -> bytes:
+@dataclass(frozen=True, eq=False)
+class PosePacket:
+    """One frame of a markerless camera node: the 13-joint `pose` it tracked, (13, 3)
+    world meters stored as a read-only float32 copy, all finite; the other fields as in
+    `MarkerPacket`. Invalid values raise `ValueError`; packets compare equal when all
+    fields are equal."""
+
+    camera: int
+    sequence: int
+    timestamp: float
+    pose: np.ndarray
+    session: str = ""
+
+    def __post_init__(self) -> None:
+        pose = np.array(self.pose, dtype=np.float32)
+        if pose.shape != (N_JOINTS, 3):
+            raise ValueError(f"pose has shape {pose.shape}, expected ({N_JOINTS}, 3)")
+        if not np.isfinite(pose).all():
+            raise ValueError("a joint coordinate is NaN or infinite")
+        pose.flags.writeable = False
+        object.__setattr__(self, "pose", pose)
+        _check_header(self.camera, self.sequence, self.timestamp, self.session)
+
+    def __eq__(self, other: object) -> bool:
+        """All fields equal."""
+        if not isinstance(other, PosePacket):
+            return NotImplemented
+        return (self.camera, self.sequence, self.timestamp, self.session) == (
+            other.camera,
+            other.sequence,
+            other.timestamp,
+            other.session,
+        ) and np.array_equal(self.pose, other.pose)
+
+
+Packet = MarkerPacket | PosePacket
+"""Either kind of camera-node packet."""
+
+
+def encode(packet: Packet, key: bytes | None = None) -> bytes:
     """The datagram of `packet`, signed with `key` when one is given (see the layout)."""
     _check_key(key)
+    pose = isinstance(packet, PosePacket)
+    values = packet.pose if pose else packet.markers
     body = (
         _HEADER.pack(
             MAGIC,
             VERSION,
-            FLAG_TAG if key is not None else 0,
+            (FLAG_TAG if key is not None else 0) | (FLAG_POSE if pose else 0),
             packet.camera,
             packet.sequence,
             packet.timestamp,
             packet.session.encode("ascii"),
         )
-        + packet.markers.astype(_MARKER_DTYPE, copy=False).tobytes()
+        + values.astype(_MARKER_DTYPE, copy=False).tobytes()
     )
     return body if key is None else body + _tag(key, body)
 
 
-def decode(data: bytes, key: bytes | None = None, *, source: str = "packet") -> MarkerPacket:
+def decode(data: bytes, key: bytes | None = None, *, source: str = "packet") -> Packet:
     """The packet in datagram `data`; a server with a `key` accepts only packets signed with it.
 
     Raises `PacketError` naming `source` (e.g. the sender's address) for any datagram
@@ -169,10 +213,12 @@ def decode(data: bytes, key: bytes | None = None, *, source: str = "packet") -> 
         raise PacketError(
             source, "unsupported version", f"version {version}, this server reads {VERSION}"
         )
-    if flags & ~FLAG_TAG:
+    if flags & ~(FLAG_TAG | FLAG_POSE):
         raise PacketError(source, "unsupported version", f"unknown flags 0x{flags:02x}")
     tagged = bool(flags & FLAG_TAG)
-    expected = BODY_BYTES + (TAG_BYTES if tagged else 0)
+    pose = bool(flags & FLAG_POSE)
+    body = POSE_BODY_BYTES if pose else BODY_BYTES
+    expected = body + (TAG_BYTES if tagged else 0)
     if size < expected:
         raise PacketError(source, "too short", f"{size} bytes, expected {expected}")
     if size > expected:
@@ -182,17 +228,21 @@ def decode(data: bytes, key: bytes | None = None, *, source: str = "packet") -> 
     if key is not None:
         if not tagged:
             raise PacketError(source, "missing tag", "the server accepts only signed packets")
-        if not hmac.compare_digest(_tag(key, data[:BODY_BYTES]), data[BODY_BYTES:]):
+        if not hmac.compare_digest(_tag(key, data[:body]), data[body:]):
             raise PacketError(source, "bad tag", "wrong key or altered packet")
     _, _, _, camera, sequence, timestamp, session = _HEADER.unpack_from(data)
-    markers = np.frombuffer(data, _MARKER_DTYPE, 2 * N_MARKERS, HEADER_BYTES)
+    name = session.rstrip(b"\0").decode("latin-1")
     try:
+        if pose:
+            joints = np.frombuffer(data, _MARKER_DTYPE, 3 * N_JOINTS, HEADER_BYTES)
+            return PosePacket(camera, sequence, timestamp, joints.reshape(N_JOINTS, 3), name)
+        markers = np.frombuffer(data, _MARKER_DTYPE, 2 * N_MARKERS, HEADER_BYTES)
         return MarkerPacket(
             camera=camera,
             sequence=sequence,
             timestamp=timestamp,
             markers=markers.reshape(N_MARKERS, 2),
-            session=session.rstrip(b"\0").decode("latin-1"),
+            session=name,
         )
     except ValueError as exc:
         raise PacketError(source, "bad values", str(exc)) from None
@@ -223,6 +273,20 @@ def read_key_file(path: str | Path) -> bytes:
             str(path), f"a key file holds at least {MIN_KEY_BYTES} bytes, this one {len(key)}"
         )
     return key
+
+
+def _check_header(camera: object, sequence: object, timestamp: object, session: object) -> None:
+    """`ValueError` unless the header fields a packet shares are valid."""
+    if not _is_int(camera) or not 0 <= camera <= 0xFFFF:
+        raise ValueError(f"camera {camera!r} is not an integer in 0..65535")
+    if not _is_int(sequence) or not 0 <= sequence < _SEQUENCE_MODULUS:
+        raise ValueError(f"sequence {sequence!r} is not an integer in 0..2^32 - 1")
+    if not _is_real(timestamp) or not math.isfinite(timestamp):
+        raise ValueError(f"timestamp {timestamp!r} is not a finite number")
+    if not isinstance(session, str) or not _SESSION.fullmatch(session):
+        raise ValueError(
+            f"session {session!r} is not 0..{SESSION_BYTES} characters of [A-Za-z0-9._-]"
+        )
 
 
 def _tag(key: bytes, body: bytes) -> bytes:

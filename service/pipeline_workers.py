@@ -35,7 +35,7 @@ from threadpoolctl import threadpool_limits
 
 from samba.errors import InputError
 from service.errors import ServiceError
-from service.frame_pipeline import FrameOutput, FramePipeline
+from service.frame_pipeline import FrameOutput, FramePipeline, PosePipeline, open_pipeline
 from service.session_config import SessionConfig
 
 LOG = logging.getLogger(__name__)
@@ -60,11 +60,11 @@ class InlinePipelines:
 
     def __init__(self, deliver: Deliver) -> None:
         self._deliver = deliver
-        self._pipelines: dict[str, FramePipeline] = {}
+        self._pipelines: dict[str, FramePipeline | PosePipeline] = {}
 
     def open(self, config: SessionConfig, clock_zero: float) -> int:
-        """Open the session's pipeline (`FramePipeline`); returns its database size."""
-        pipeline = FramePipeline(config, clock_zero)
+        """Open the session's pipeline (`open_pipeline`); returns its database size."""
+        pipeline = open_pipeline(config, clock_zero)
         self._pipelines[config.name] = pipeline
         return pipeline.database_poses
 
@@ -273,7 +273,7 @@ class _Worker:
 
 
 def _compute(
-    pipelines: dict[str, FramePipeline],
+    pipelines: dict[str, FramePipeline | PosePipeline],
     session: str,
     sequence: int,
     pixels: np.ndarray,
@@ -295,7 +295,7 @@ def _serve_pipelines(connection: Connection) -> None:
     """A worker process: open, compute and close pipelines as the server asks, until the
     pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the server's to handle
-    pipelines: dict[str, FramePipeline] = {}
+    pipelines: dict[str, FramePipeline | PosePipeline] = {}
     with threadpool_limits(1):
         try:
             while True:
@@ -328,10 +328,10 @@ def _serve_pipelines(connection: Connection) -> None:
 
 
 def _open(
-    pipelines: dict[str, FramePipeline], config: SessionConfig, clock_zero: float
+    pipelines: dict[str, FramePipeline | PosePipeline], config: SessionConfig, clock_zero: float
 ) -> tuple[Any, ...]:
     try:
-        pipeline = FramePipeline(config, clock_zero)
+        pipeline = open_pipeline(config, clock_zero)
     except InputError as exc:
         return ("refused", config.name, exc.source, exc.problem, exc.line)
     except Exception as exc:

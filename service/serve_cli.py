@@ -18,7 +18,7 @@ from service.errors import ServiceError
 from service.packet import read_key_file
 from service.serve import DEFAULT_WORKERS, HTTP_PORT, UDP_PORT, LiveServer
 from service.session import CaptureSession
-from service.session_config import SessionConfig, read_sessions
+from service.session_config import INPUTS, SessionConfig, read_sessions
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -29,6 +29,13 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     one = parser.add_argument_group("one session from flags (or use --config)")
     one.add_argument("--config", help="TOML file of [[session]] tables (see README)")
+    one.add_argument(
+        "--input",
+        choices=INPUTS,
+        default="markers",
+        help="what the nodes send: markers (calibrated cameras, the default) or poses "
+        "(one markerless node, samba node --mode silhouette; no --calib or --db)",
+    )
     one.add_argument("--calib", help="camera calibration TOML; camera id n = n-th camera")
     one.add_argument("--db", help="pose store directory")
     one.add_argument("--session", default="default", help="session name (default: default)")
@@ -108,19 +115,19 @@ def _configs(args: argparse.Namespace) -> list[SessionConfig]:
         if args.calib or args.db:
             raise ServiceError("--config", "give either --config or --calib/--db, not both")
         return read_sessions(args.config)
-    if not (args.calib and args.db):
+    if args.input == "markers" and not (args.calib and args.db):
         raise ServiceError("samba serve", "give --config FILE, or --calib FILE and --db STORE")
     values = {
         "name": args.session,
-        "calibration": args.calib,
-        "database": args.db,
+        "input": args.input,
         "method": args.method,
         "fps": args.fps,
         "vmc": [f"{host}:{port}" for host, port in args.vmc],
         "wait_ms": args.wait_ms,
     }
-    if args.avatar:
-        values["avatar"] = args.avatar
+    for key, value in (("calibration", args.calib), ("database", args.db), ("avatar", args.avatar)):
+        if value:
+            values[key] = value
     return [SessionConfig.from_mapping(values, "--session")]
 
 
@@ -149,11 +156,13 @@ def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:
     for s in sessions:
         c = s.config
         vmc = ", ".join(f"{h}:{p}" for h, p in c.vmc) or "none"
-        print(
-            f"  session {s.name}: {len(s.cameras)} cameras ({c.calibration}), database "
-            f"{c.database} ({s.database_poses} poses), method {c.method}, "
-            f"{c.fps:g} fps, VMC -> {vmc}"
+        source = (
+            "the poses of one markerless node"
+            if s.cameras is None
+            else f"{len(s.cameras)} cameras ({c.calibration}), database {c.database} "
+            f"({s.database_poses} poses), method {c.method}"
         )
+        print(f"  session {s.name}: {source}, {c.fps:g} fps, VMC -> {vmc}")
         if server.http_url:
             print(f"    viewer: {server.http_url}/viewer/{s.name}")
         take = s.recording

@@ -4,8 +4,9 @@ No sockets here (`service.udp_input` reads them, `service.serve` runs everything
 `receive` takes one datagram with the wall-clock time it arrived, decodes it
 (`service.packet.decode`, with the shared key when one is set) and hands the packet to
 the session its session id names — or, when the id is empty, to the only session. A
-datagram that is dropped is counted by reason: a `PacketError` reason, or
-"unknown session". Nothing a sender does raises out of `receive`.
+datagram that is dropped is counted by reason: a `PacketError` reason, "unknown
+session", or "wrong input" (marker packets to a poses session, or the other way round).
+Nothing a sender does raises out of `receive`.
 
 The sessions' frames are computed by `pipelines` (`service.pipeline_workers`; by
 default `InlinePipelines`, in the caller's thread); whatever runs them hands each
@@ -28,6 +29,8 @@ from service.viewer import ViewerHub
 
 UNKNOWN_SESSION = "unknown session"
 """Drop reason of a valid packet whose session id names no session."""
+WRONG_INPUT = "wrong input"
+"""Drop reason of a marker packet sent to a poses session, or the other way round."""
 
 
 class CaptureServer:
@@ -112,6 +115,9 @@ class CaptureServer:
             session = next(iter(self.sessions.values()))
         if session is None:
             self.drops[UNKNOWN_SESSION] += 1
+            return
+        if not session.accepts(packet):
+            self.drops[WRONG_INPUT] += 1
             return
         session.on_packet(packet, arrival)
 

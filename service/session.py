@@ -3,7 +3,9 @@
 Per frame assembled by `FrameSync` (one packet per camera, or at least `min_cameras`
 after waiting `wait_ms`), the session hands the cameras' labelled pixels to its
 `FramePipeline` (triangulation, reconstruction, retargeting, VMC out; in the event loop
-or in a worker process, see `service.pipeline_workers`). When the computed frame comes
+or in a worker process, see `service.pipeline_workers`). A session whose `input` is
+"poses" takes the pose packets of one markerless node instead (whatever camera id it
+sends), and its `PosePipeline` only retargets and sends them. When the computed frame comes
 back (`complete`), the session counts it, sends it to the viewer and writes it to the
 take being recorded.
 
@@ -17,7 +19,7 @@ from __future__ import annotations
 import logging
 import re
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Protocol
@@ -30,7 +32,7 @@ from service.errors import ServiceError
 from service.frame_pipeline import FrameOutput
 from service.frame_sync import FrameSync, SyncedFrame
 from service.metrics import LatencyWindow
-from service.packet import MarkerPacket
+from service.packet import Packet, PosePacket
 from service.session_config import SessionConfig
 from service.take_recorder import TakeRecorder
 from service.viewer import ViewerHub, frame_message
@@ -96,15 +98,17 @@ class CaptureSession:
         self.config = config
         self.takes_dir = Path(takes_dir)
         self._viewer = viewer
-        self.cameras = read_calibration(config.calibration)
+        self.poses = config.input == "poses"
+        self.cameras = None if self.poses else read_calibration(config.calibration)
         self.started = time.time()
         self._pipelines = pipelines
         self.database_poses = pipelines.open(config, self.started)
+        count = 1 if self.cameras is None else len(self.cameras)
         self.sync = FrameSync(
-            range(len(self.cameras)),
+            range(count),
             config.fps,
             wait_s=config.wait_ms / 1e3,
-            min_cameras=min(config.min_cameras, len(self.cameras)),
+            min_cameras=min(config.min_cameras, count),
         )
         self.latency = LatencyWindow()
         self.frames_out = 0
@@ -121,9 +125,15 @@ class CaptureSession:
         """The session's name (the packets' session id)."""
         return self.config.name
 
-    def on_packet(self, packet: MarkerPacket, arrival: float) -> None:
-        """Take one decoded packet that arrived at `arrival` (s) and submit the frames it
-        completes or pushes out."""
+    def accepts(self, packet: Packet) -> bool:
+        """Whether `packet` is of the kind this session's nodes send (`input`)."""
+        return isinstance(packet, PosePacket) == self.poses
+
+    def on_packet(self, packet: Packet, arrival: float) -> None:
+        """Take one decoded packet of the kind the session `accepts`, that arrived at
+        `arrival` (s), and submit the frames it completes or pushes out."""
+        if isinstance(packet, PosePacket):
+            packet = replace(packet, camera=0)  # one node: its camera id is informative
         for frame in self.sync.add(packet, arrival):
             self._submit(frame)
 
@@ -137,12 +147,15 @@ class CaptureSession:
         return self.sync.deadline()
 
     def _submit(self, frame: SyncedFrame) -> None:
-        pixels = np.full((len(self.cameras), N_MARKERS, 2), np.nan)
-        for camera, packet in frame.packets.items():
-            pixels[camera] = packet.markers
+        if self.cameras is None:
+            values = frame.packets[0].pose
+        else:
+            values = np.full((len(self.cameras), N_MARKERS, 2), np.nan)
+            for camera, packet in frame.packets.items():
+                values[camera] = packet.markers
         self._sequence += 1
         self._in_flight[self._sequence] = frame
-        self._pipelines.submit(self.name, self._sequence, pixels, frame.time, frame.last_arrival)
+        self._pipelines.submit(self.name, self._sequence, values, frame.time, frame.last_arrival)
 
     def complete(self, sequence: int, output: FrameOutput) -> None:
         """Take the pipeline's `output` for frame `sequence`: count it, record it, show it
@@ -160,7 +173,7 @@ class CaptureSession:
                 max(0, round(frame.time * 1e9)),
                 estimate,
                 markers,
-                {str(c): p.markers for c, p in frame.packets.items()},
+                {} if self.poses else {str(c): p.markers for c, p in frame.packets.items()},
             )
         if self._viewer is not None and self._viewer.clients(self.name):
             self._viewer.publish(
@@ -245,12 +258,13 @@ class CaptureSession:
         c = self.config
         return {
             "name": c.name,
+            "input": c.input,
             "cameras": [
                 {"id": i, "name": cam.name, "size": list(cam.size)}
-                for i, cam in enumerate(self.cameras)
+                for i, cam in enumerate(self.cameras or ())
             ],
-            "calibration": str(c.calibration),
-            "database": str(c.database),
+            "calibration": None if c.calibration is None else str(c.calibration),
+            "database": None if c.database is None else str(c.database),
             "database_poses": self.database_poses,
             "method": c.method,
             "fps": c.fps,

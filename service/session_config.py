@@ -6,8 +6,9 @@ A session comes from `samba serve` flags, from a `[[session]]` table of a TOML f
 | key | type | default | meaning |
 |---|---|---|---|
 | `name` | string | (required) | session id: 1..16 of `[A-Za-z0-9._-]`, as camera nodes send it |
-| `calibration` | path | (required) | camera calibration TOML; camera id n = the n-th camera table |
-| `database` | path | (required) | pose store directory (`samba db init` / `import`) |
+| `input` | string | `"markers"` | what nodes send: `"markers"` or `"poses"` (see below) |
+| `calibration` | path | (markers) | camera calibration TOML; camera id n = the n-th camera table |
+| `database` | path | (markers) | pose store directory (`samba db init` / `import`) |
 | `method` | string | `"samba"` | reconstruction method (`samba eval --methods` names) |
 | `fps` | number | 60 | nominal frame rate of the cameras |
 | `vmc` | list of `"HOST:PORT"` | `[]` | VMC/OSC receivers (VSeeFace, EVMC4U, VMC4UE ...) |
@@ -16,7 +17,11 @@ A session comes from `samba serve` flags, from a `[[session]]` table of a TOML f
 | `min_cameras` | integer | 2 | fewest cameras a frame is reconstructed from |
 | `gate_px` | number | 10 | triangulation outlier gate, pixels (0 = none) |
 
-Relative paths in a file are relative to the file's folder.
+Relative paths in a file are relative to the file's folder. A `"markers"` session
+(the default) takes the marker packets of its calibrated cameras and needs
+`calibration` and `database`; a `"poses"` session takes the pose packets of one
+markerless node (`samba node --mode silhouette`), which tracks the body itself, and
+needs neither (`method`, `min_cameras` and `gate_px` do not apply).
 """
 
 from __future__ import annotations
@@ -37,8 +42,12 @@ from service.errors import ServiceError
 SESSION_NAME = re.compile(r"[A-Za-z0-9._-]{1,16}")
 """A session's name: what camera nodes put in their packets' session field."""
 
+INPUTS = ("markers", "poses")
+"""What a session's camera nodes send (`input`)."""
+
 _KEYS = (
     "name",
+    "input",
     "calibration",
     "database",
     "method",
@@ -56,8 +65,8 @@ class SessionConfig:
     """One capture session's settings (see the module docstring for each field)."""
 
     name: str
-    calibration: Path
-    database: Path
+    calibration: Path | None
+    database: Path | None
     method: str = "samba"
     fps: float = 60.0
     vmc: tuple[tuple[str, int], ...] = ()
@@ -65,6 +74,7 @@ class SessionConfig:
     wait_ms: float = 50.0
     min_cameras: int = 2
     gate_px: float = 10.0
+    input: str = "markers"
 
     @classmethod
     def from_mapping(
@@ -76,7 +86,12 @@ class SessionConfig:
         unknown = sorted(set(values) - set(_KEYS))
         if unknown:
             raise ServiceError(source, f"unknown key {unknown[0]!r}; known: {', '.join(_KEYS)}")
-        for key in ("name", "calibration", "database"):
+        if "name" not in values:
+            raise ServiceError(source, "missing key 'name'")
+        kind = _string(values, "input", source, "markers")
+        if kind not in INPUTS:
+            raise ServiceError(source, f"input must be one of {', '.join(INPUTS)}, got {kind!r}")
+        for key in ("calibration", "database") if kind == "markers" else ():
             if key not in values:
                 raise ServiceError(source, f"missing key {key!r}")
         name = _string(values, "name", source)
@@ -93,18 +108,18 @@ class SessionConfig:
             targets = tuple(address(v) for v in vmc)
         except argparse.ArgumentTypeError as exc:
             raise ServiceError(where, f"vmc: {exc}") from None
-        avatar = values.get("avatar")
         return cls(
             name=name,
-            calibration=_path(values, "calibration", where, base),
-            database=_path(values, "database", where, base),
+            calibration=_optional_path(values, "calibration", where, base),
+            database=_optional_path(values, "database", where, base),
             method=method,
             fps=_number(values, "fps", where, 60.0),
             vmc=targets,
-            avatar=None if avatar is None else _path(values, "avatar", where, base),
+            avatar=_optional_path(values, "avatar", where, base),
             wait_ms=_number(values, "wait_ms", where, 50.0, allow_zero=True),
             min_cameras=int(_number(values, "min_cameras", where, 2, integer=True)),
             gate_px=_number(values, "gate_px", where, 10.0, allow_zero=True),
+            input=kind,
         )
 
 
@@ -139,7 +154,11 @@ def _string(values: Mapping[str, Any], key: str, where: str, default: str | None
     return value
 
 
-def _path(values: Mapping[str, Any], key: str, where: str, base: Path | None) -> Path:
+def _optional_path(
+    values: Mapping[str, Any], key: str, where: str, base: Path | None
+) -> Path | None:
+    if key not in values:
+        return None
     path = Path(_string(values, key, where))
     return base / path if base is not None and not path.is_absolute() else path
 

@@ -21,10 +21,13 @@ from samba.errors import InputError
 from service.errors import PacketError
 from service.packet import (
     BODY_BYTES,
+    FLAG_POSE,
     HEADER_BYTES,
     MAX_PACKET_BYTES,
+    POSE_BODY_BYTES,
     TAG_BYTES,
     MarkerPacket,
+    PosePacket,
     decode,
     encode,
     sequence_delta,
@@ -205,7 +208,7 @@ def test_header_reasons() -> None:
     assert reason_of(b"\0" * 100) == "bad magic"
     assert reason_of(plain[:4] + b"\x02" + plain[5:]) == "unsupported version"
     assert reason_of(plain[:4] + b"\x00" + plain[5:]) == "unsupported version"
-    assert reason_of(plain[:5] + b"\x02" + plain[6:]) == "unsupported version"
+    assert reason_of(plain[:5] + b"\x04" + plain[6:]) == "unsupported version"
     assert reason_of(plain[:5] + b"\x80" + plain[6:]) == "unsupported version"
 
 
@@ -322,3 +325,22 @@ def test_fuzz_single_byte_mutation(
         assert result is not None
     elif result is None:
         assert reason_of(mutated) == "bad values"
+
+
+def test_a_pose_packet_carries_13_joints_under_the_same_header() -> None:
+    pose = np.arange(39, dtype=np.float32).reshape(13, 3) / 10
+    packet = PosePacket(7, 42, 12.5, pose, "stage")
+    plain, signed = encode(packet), encode(packet, KEY)
+    assert (len(plain), len(signed), POSE_BODY_BYTES) == (192, 208, 192)
+    assert plain[5] == FLAG_POSE and signed[5] == FLAG_POSE | 1
+    assert np.array_equal(np.frombuffer(plain[36:], "<f4").reshape(13, 3), pose)
+    assert decode(plain) == packet and decode(signed, KEY) == packet
+    assert signed[192:] == hmac.new(KEY, signed[:192], hashlib.sha256).digest()[:16]
+    assert reason_of(plain[:-1]) == "too short" and reason_of(plain + b"\0") == "bad length"
+    assert reason_of(signed[:-1] + bytes([signed[-1] ^ 1]), KEY) == "bad tag"
+    nan = plain[:36] + np.full(39, np.nan, "<f4").tobytes()
+    assert reason_of(nan) == "bad values"
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        PosePacket(0, 0, 0.0, np.full((13, 3), np.inf))
+    with pytest.raises(ValueError, match="shape"):
+        PosePacket(0, 0, 0.0, np.zeros((8, 2)))

@@ -11,7 +11,7 @@ from samba.body_model import ANKLE_HEIGHT_FRACTION
 from samba.camera import Camera
 from samba.errors import InputError
 from samba.silhouette_render import render_silhouettes
-from samba.silhouette_view import HOME_DISTANCE, SilhouetteView
+from samba.silhouette_view import HOME_AIM_HEIGHT, HOME_DISTANCE, SilhouetteView
 from samba.skeleton import standard_pose
 
 STANDING = standard_pose(BODY.height) + np.array([0.0, ANKLE_HEIGHT_FRACTION * BODY.height, 0.0])
@@ -51,10 +51,14 @@ def test_floor_points_are_nan_above_the_horizon() -> None:
     assert np.isfinite(the_view.floor_points(np.array([160.0, 230.0]))).all()
 
 
-def test_home_defaults_to_where_the_optical_axis_meets_the_floor() -> None:
+def test_home_defaults_to_the_floor_under_the_aim_point() -> None:
+    # The camera aims at the subject's middle: home is under the point of the optical
+    # axis HOME_AIM_HEIGHT above the floor (CAMERA aims at (0, 0.9, 0)).
     the_view = SilhouetteView(CAMERA)
-    assert the_view.home[1] == 0.0
-    np.testing.assert_allclose(the_view.home_pixel, the_view.camera.matrix[:2, 2], atol=1e-6)
+    np.testing.assert_allclose(the_view.home, [0.0, 0.0, 0.0], atol=1e-9)
+    down = Camera.look_at("down", (0.0, 2.5, 3.0), (0.0, 0.0, 0.0), (320, 240), 55.0)
+    aim = 3.0 * (1 - (2.5 - HOME_AIM_HEIGHT) / 2.5)
+    np.testing.assert_allclose(SilhouetteView(down).home, [0.0, 0.0, aim], atol=1e-9)
     level = Camera.look_at("level", (1.0, 1.2, 2.0), (1.0, 1.2, 0.0), (320, 240), 55.0)
     np.testing.assert_allclose(
         SilhouetteView(level).home, [1.0, 0.0, 2.0 - HOME_DISTANCE], atol=1e-9

@@ -1,0 +1,116 @@
+"""Shape trees saved with the pose database: `<store>/shape_trees/<name>.npz`.
+
+A shape tree (`samba.shape_tree.ShapeTree`) is built once per camera and body model and
+takes minutes for a large database, so it is kept beside the poses it was built from.
+One NumPy archive (`np.savez`, no pickles) holds the camera (intrinsics, pose,
+distortion, image size), the view's home point, the body model's girths and every
+level's arrays; `FORMAT` versions the layout. Files are written atomically: a crash
+leaves the old tree or the new one, never a part.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from db.errors import StoreError
+from samba.atomic_file import atomic_path
+from samba.body_model import BodyModel
+from samba.camera import Camera
+from samba.shape_tree import ShapeTree, TreeLevel
+from samba.silhouette_runs import SilhouetteRuns
+from samba.silhouette_view import SilhouetteView
+
+FORMAT = "samba-shape-tree/1"
+TREES_FOLDER = "shape_trees"
+_LEVEL_ARRAYS = ("offsets", "starts", "ends", "poses", "floor_offsets", "visibility", "parents")
+
+
+def tree_path(store: str | Path, name: str) -> Path:
+    """Where the tree `name` of the pose store at `store` lives."""
+    return Path(store) / TREES_FOLDER / f"{name}.npz"
+
+
+def write_shape_tree(path: str | Path, tree: ShapeTree) -> None:
+    """Save `tree` to `path` (.npz) atomically, creating its folder."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    camera, body = tree.view.camera, tree.body
+    header = {
+        "format": FORMAT,
+        "camera": {"name": camera.name, "size": list(camera.size)},
+        "view_size": list(tree.view.size),
+        "body": {
+            "name": body.name,
+            "kind": body.kind,
+            "height": body.height,
+            "chest": body.chest,
+            "waist": body.waist,
+            "hip": body.hip,
+        },
+        "levels": [list(level.silhouettes.size) for level in tree.levels],
+    }
+    arrays: dict[str, np.ndarray] = {
+        "header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8),
+        "camera_matrix": camera.matrix,
+        "camera_rotation": camera.rotation,
+        "camera_translation": camera.translation,
+        "camera_distortion": camera.distortion,
+        "home": tree.view.home,
+    }
+    for i, level in enumerate(tree.levels):
+        runs = level.silhouettes
+        values = (runs.offsets, runs.starts, runs.ends, level.poses, level.floor_offsets)
+        values += (level.visibility, level.parents)
+        arrays.update({f"level{i}_{key}": v for key, v in zip(_LEVEL_ARRAYS, values, strict=True)})
+        arrays[f"level{i}_spread"] = level.spread
+    with atomic_path(path) as tmp, open(tmp, "wb") as file:
+        np.savez(file, **arrays)
+
+
+def read_shape_tree(path: str | Path) -> ShapeTree:
+    """The tree saved at `path`; `StoreError` naming the file when it is missing, not a
+    shape tree, of another format version or damaged."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            header = json.loads(bytes(archive["header"]).decode())
+            if header.get("format") != FORMAT:
+                raise StoreError(str(path), f"not a {FORMAT} file ({header.get('format')!r})")
+            arrays = {key: archive[key] for key in archive.files}
+    except FileNotFoundError:
+        raise StoreError(str(path), "no such shape tree (build it with samba db tree)") from None
+    except (OSError, EOFError, ValueError, TypeError, KeyError, zipfile.BadZipFile) as exc:
+        raise StoreError(str(path), f"damaged shape tree: {exc}") from None
+    try:
+        return _tree(header, arrays)
+    except (KeyError, ValueError, TypeError) as exc:
+        raise StoreError(str(path), f"damaged shape tree: {exc}") from None
+
+
+def _tree(header: dict, arrays: dict[str, np.ndarray]) -> ShapeTree:
+    camera = Camera(
+        name=header["camera"]["name"],
+        size=tuple(header["camera"]["size"]),
+        matrix=arrays["camera_matrix"],
+        rotation=arrays["camera_rotation"],
+        translation=arrays["camera_translation"],
+        distortion=arrays["camera_distortion"],
+    )
+    view = SilhouetteView(camera, arrays["home"], size=tuple(header["view_size"]))
+    body = BodyModel.from_girths(**header["body"])
+    levels = []
+    for i, size in enumerate(header["levels"]):
+        offsets, starts, ends, poses, floor_offsets, visibility, parents = (
+            arrays[f"level{i}_{key}"] for key in _LEVEL_ARRAYS
+        )
+        runs = SilhouetteRuns(tuple(size), offsets, starts, ends)
+        if len(runs) != len(poses) or runs.offsets[-1] != len(runs.starts):
+            raise ValueError(f"level {i}: {len(runs)} silhouettes for {len(poses)} poses")
+        levels.append(
+            TreeLevel(runs, poses, floor_offsets, visibility, parents, arrays[f"level{i}_spread"])
+        )
+    return ShapeTree(view, body, tuple(levels))

@@ -1,0 +1,135 @@
+"""`samba track-video VIDEO --calib FILE --db STORE -o TAKE.mcap`: markerless capture from
+one ordinary camera (silhouette tracking over the store's shape tree), written as a take.
+
+The empty stage comes from `--background` (a video or image folder of the stage without
+the subject) or from the first `--empty-frames` frames of VIDEO. Each frame's
+silhouette (`samba.silhouette_extraction`) is tracked with `samba.silhouette_tracker`;
+the 13-joint poses go to an MCAP take like the live service's, which `samba export`
+and `samba db import` read. The shape tree is read from the store
+(`samba db tree`), and built and saved there first when it is missing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from db.tree_cli import add_camera_arguments, chosen_body, chosen_camera, chosen_home, tree_for
+from samba.camera import Camera
+from samba.cli_arguments import natural, positive_float
+from samba.errors import InputError
+from samba.frame_source import open_frames
+from samba.reconstruction import PoseEstimate
+from samba.silhouette_distance import downsampled
+from samba.silhouette_extraction import BACKGROUND_METHODS, SilhouetteExtractor
+from samba.silhouette_tracker import SilhouetteTracker
+from samba.silhouette_view import SilhouetteView
+from samba.skeleton import N_MARKERS
+from service.take_recorder import TakeRecorder
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    """Add the `track-video` arguments to `parser`."""
+    parser.add_argument("video", help="video file or folder of images of one camera")
+    parser.add_argument("--calib", required=True, help="camera calibration TOML")
+    parser.add_argument("--db", required=True, help="pose store (its shape trees)")
+    parser.add_argument("-o", "--out", required=True, help="take to write (.mcap)")
+    add_camera_arguments(parser)
+    parser.add_argument("--tree", help="shape tree name in the store (default: CAMERA-BODY)")
+    stage = parser.add_mutually_exclusive_group(required=True)
+    stage.add_argument("--background", help="video or image folder of the empty stage")
+    stage.add_argument(
+        "--empty-frames", type=natural, help="the first N frames of VIDEO show the empty stage"
+    )
+    parser.add_argument(
+        "--method", choices=BACKGROUND_METHODS, default="colour", help="background model"
+    )
+    parser.add_argument("--fps", type=positive_float, default=30.0, help="frame rate of VIDEO")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Track VIDEO and write the take; print what was done. A run that fails leaves no
+    take behind."""
+    out = Path(args.out)
+    if out.suffix.lower() != ".mcap":
+        raise InputError(str(out), "the take is written as MCAP: give a .mcap file name")
+    if out.exists():
+        raise InputError(str(out), "already exists; takes are never overwritten")
+    camera = chosen_camera(args.calib, args.camera)
+    view = SilhouetteView(camera, chosen_home(args))
+    tree = tree_for(args.db, args.tree, view, chosen_body(args))
+    frames = _sized(open_frames(args.video).frames(), args.video, camera, args.calib)
+    if args.background:
+        background = open_frames(args.background).frames()
+        empty = list(_sized(background, args.background, camera, args.calib))
+    else:
+        empty = list(itertools.islice(frames, args.empty_frames))
+    extractor = SilhouetteExtractor.learn([frame for _, frame in empty], method=args.method)
+    try:
+        seconds, held = _track(frames, extractor, SilhouetteTracker(tree), out, args.fps)
+    except BaseException:
+        out.unlink(missing_ok=True)
+        raise
+    if not seconds:
+        out.unlink(missing_ok=True)
+        raise InputError(args.video, "nobody was seen in any frame")
+    print(
+        f"track-video: {len(seconds)} frames tracked ({held} held: no silhouette), "
+        f"{np.median(seconds) * 1e3:.1f} ms per frame (p50: silhouette and tracking), "
+        f"shape tree of {len(tree.leaves):,} poses -> {out}"
+    )
+    return 0
+
+
+def _track(
+    frames: Iterator[tuple[int, np.ndarray]],
+    extractor: SilhouetteExtractor,
+    tracker: SilhouetteTracker,
+    out: Path,
+    fps: float,
+) -> tuple[list[float], int]:
+    """Track every frame from the first with somebody in view, writing the take to
+    `out`; returns the seconds each tracked frame took and how many held the pose."""
+    size = tracker.tree.view.size
+    seconds, held = [], 0
+    with TakeRecorder(out, fps) as recorder:
+        for number, frame in frames:
+            start = time.perf_counter()
+            mask = extractor.silhouette(frame)
+            if not seconds and not mask.any():
+                continue  # nobody in view yet
+            if mask.shape != size[::-1]:
+                mask = downsampled(mask, size)
+            estimate = tracker.step(mask)
+            seconds.append(time.perf_counter() - start)
+            held += not estimate.found
+            recorder.write_frame(
+                round(number / fps * 1e9),
+                PoseEstimate(
+                    estimate.pose, estimate.distance, 0, estimate.found, not estimate.found
+                ),
+                np.full((N_MARKERS, 3), np.nan),
+            )
+    return seconds, held
+
+
+def _sized(
+    frames: Iterator[tuple[int, np.ndarray]], source: str, camera: Camera, calibration: str
+) -> Iterator[tuple[int, np.ndarray]]:
+    """`frames` of `source`, checked to be of the image size of `camera` (of the file
+    `calibration`); InputError naming both otherwise."""
+    width, height = camera.size
+    for number, frame in frames:
+        if frame.shape[:2] != (height, width):
+            raise InputError(
+                source,
+                f"frames are {frame.shape[1]}x{frame.shape[0]} but camera {camera.name!r} "
+                f"of {calibration} takes {width}x{height} images",
+            )
+        yield number, frame
