@@ -75,10 +75,12 @@ def synthetic_tree(takes: int) -> tuple[ShapeTree, float]:
     return tree, time.perf_counter() - start
 
 
-def test_takes(reps: int, view: SilhouetteView) -> list[tuple[str, np.ndarray]]:
+def held_out_takes(
+    reps: int, view: SilhouetteView, motions: tuple[str, ...] = MOTIONS
+) -> list[tuple[str, np.ndarray]]:
     """(motion, staged poses) of `reps` held-out takes per motion."""
     takes = []
-    for k, (motion, _) in enumerate((m, r) for m in MOTIONS for r in range(reps)):
+    for k, (motion, _) in enumerate((m, r) for m in motions for r in range(reps)):
         poses = generate(motion, 4.0, FPS, seed=900 + k).poses.astype(np.float64)
         takes.append((motion, staged(poses, view, BODY.height, in_place=motion == "walk")))
     return takes
@@ -101,13 +103,15 @@ def nearest_silhouette(poses: np.ndarray, tree: ShapeTree, noise: float, seed: i
     return np.linalg.norm(np.array(estimates) - poses, axis=-1).mean(axis=1) * 45.0 / tibia
 
 
-def accuracy(tree: ShapeTree, reps: int) -> list[list[object]]:
+def accuracy(
+    tree: ShapeTree, reps: int, motions: tuple[str, ...], noises: tuple[float, ...]
+) -> list[list[object]]:
     """Rows of table 1: per noise level and motion, tracker and baselines."""
     rows = []
-    takes = test_takes(reps, tree.view)
+    takes = held_out_takes(reps, tree.view, motions)
     xor = TrackerSettings(distance="xor")
-    for noise in NOISE:
-        for motion in MOTIONS:
+    for noise in noises:
+        for motion in motions:
             ours, plain, nearest = [], [], []
             for k, (name, poses) in enumerate(takes):
                 if name != motion:
@@ -150,7 +154,7 @@ def large_database() -> tuple[str, np.ndarray]:
 def speed(tree: ShapeTree, reps: int) -> tuple[np.ndarray, np.ndarray]:
     """Seconds per frame (tracker, full leaf scan) on held-out takes at noise 0.5."""
     tracked, scanned = [], []
-    for k, (name, poses) in enumerate(test_takes(reps, tree.view)):
+    for k, (name, poses) in enumerate(held_out_takes(reps, tree.view)):
         tracked.append(track_take(name, poses, tree, None, 0.5, seed=k).seconds)
         masks = observed_silhouettes(poses[:10], tree, 0.5, np.random.default_rng(k))
         with threadpool_limits(1):
@@ -163,12 +167,20 @@ def speed(tree: ShapeTree, reps: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(tracked), np.array(scanned)
 
 
-def bench(takes: int, reps: int, sequences: int, large: bool) -> dict[str, list[list[object]]]:
-    """Run every table; returns their rows by name."""
+def bench(
+    takes: int,
+    reps: int,
+    sequences: int,
+    large: bool,
+    motions: tuple[str, ...] = MOTIONS,
+    noises: tuple[float, ...] = NOISE,
+) -> dict[str, list[list[object]]]:
+    """Run every table (accuracy on `motions` at `noises` only); returns their rows by
+    name."""
     tree, seconds = synthetic_tree(takes)
     counts = " / ".join(f"{len(level):,}" for level in tree.levels)
     print(f"Synthetic tree: {takes} takes per motion -> {counts} nodes, built in {seconds:.0f} s")
-    tables: dict[str, list[list[object]]] = {"accuracy": accuracy(tree, reps)}
+    tables: dict[str, list[list[object]]] = {"accuracy": accuracy(tree, reps, motions, noises)}
     print_table(
         f"1. Accuracy on held-out takes ({reps} per motion, {FPS:g} fps), MPJPE cm "
         f"(tibia 45 cm) and failures % (> {FAILURE_CM:g} cm)",

@@ -87,3 +87,24 @@ def test_service_benchmark_prints_its_latency_table(capsys: pytest.CaptureFixtur
     assert "Baseline, same run: Reconstructor.step (samba)" in out and "e2e p99" in out
     assert row[:5] == [1, 1, 120, 0, 0]  # 60 frames x 2 cameras in, every frame out, received
     assert all(isinstance(v, float) and v > 0 for v in row[5:10])
+
+
+_spec_silhouette = importlib.util.spec_from_file_location(
+    "bench_silhouette", ROOT / "bench" / "bench_silhouette.py"
+)
+bench_silhouette = importlib.util.module_from_spec(_spec_silhouette)
+_spec_silhouette.loader.exec_module(bench_silhouette)
+
+
+def test_silhouette_benchmark_prints_accuracy_figure_4_and_speed(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    tables = bench_silhouette.bench(1, 1, 1, False, motions=("wave",), noises=(0.5,))
+    out = capsys.readouterr().out
+    assert "1. Accuracy on held-out takes" in out and "2. Figure 4" in out
+    (row,) = tables["accuracy"]
+    assert row[:2] == [0.5, "wave"] and all(isinstance(v, float) for v in row[2:])
+    assert len(tables["figure4"]) == 6 and {r[2] + r[3] + r[4] for r in tables["figure4"]} == {1}
+    tree, _ = bench_silhouette.synthetic_tree(1)
+    tracked, scanned = bench_silhouette.speed(tree, 1)
+    assert len(tracked) == 60 * len(bench_silhouette.MOTIONS) and len(scanned) > 0
