@@ -1,7 +1,7 @@
 """Single-camera silhouette tracking: accuracy, the paper's Figure 4, speed and tree size.
 
 Run from the project root:  python bench/bench_silhouette.py [--takes 3] [--reps 2]
-                                                             [--sequences 24] [--no-large]
+                            [--sequences 24] [--large-headings 15] [--tables 1 2 3]
 
 One camera, 320x240 silhouettes, the men's M body model (1.75 m); held-out takes of the
 built-in synthetic motions (seeds the trees never saw), staged in front of the camera
@@ -18,9 +18,9 @@ Tables:
 2. the paper's Figure 4: `--sequences` arm swings seen from the side, three distances x
    the plain (m = 1) and the occlusion-aware (m = 5) motion model;
 3. speed and size: the tree of a large database (the CMU takes of ../shared/data or
-   $SAMBA_DATA plus the synthetic library, turned every 15 degrees; 50,000 leaves or
-   more), its build time and memory, and the time per frame (p50 / p99, one core) of
-   the tracker on it, beside the paper's 127 ms (PC) and 86 ms (Cell) averages and the
+   $SAMBA_DATA plus the synthetic library, turned every `--large-headings` degrees;
+   50,000 leaves or more), its build time and memory, and the time per frame (p50 / p99,
+   one core) of the tracker on it, beside the paper's 127 ms (PC) and 86 ms (Cell) averages and the
    nearest-silhouette baseline's full leaf scan on the same tree.
 """
 
@@ -174,9 +174,26 @@ def bench(
     large: bool,
     motions: tuple[str, ...] = MOTIONS,
     noises: tuple[float, ...] = NOISE,
+    large_headings: float = 15.0,
+    small: bool = True,
 ) -> dict[str, list[list[object]]]:
-    """Run every table (accuracy on `motions` at `noises` only); returns their rows by
-    name."""
+    """Run the tables (1 and 2 when `small`, 3 when `large`; accuracy on `motions` at
+    `noises` only); returns their rows by name."""
+    tables: dict[str, list[list[object]]] = {}
+    if small:
+        tables.update(_small_tables(takes, reps, sequences, motions, noises))
+    if large:
+        tables["speed"] = _speed_table(large_headings)
+    return tables
+
+
+def _small_tables(
+    takes: int,
+    reps: int,
+    sequences: int,
+    motions: tuple[str, ...],
+    noises: tuple[float, ...],
+) -> dict[str, list[list[object]]]:
     tree, seconds = synthetic_tree(takes)
     counts = " / ".join(f"{len(level):,}" for level in tree.levels)
     print(f"Synthetic tree: {takes} takes per motion -> {counts} nodes, built in {seconds:.0f} s")
@@ -196,41 +213,44 @@ def bench(
         ["distance", "m", "fail", "error", "success", "arm error cm"],
         tables["figure4"],
     )
-    if large:
-        label, poses = large_database()
-        start = time.perf_counter()
-        big = ShapeTree.build(poses, SilhouetteView(CAMERA), BODY)
-        build = time.perf_counter() - start
-        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        tracked, scanned = speed(big, 1)
-        counts = " / ".join(f"{len(level):,}" for level in big.levels)
-        tables["speed"] = [
-            [
-                "tracker",
-                counts,
-                float(np.percentile(tracked, 50) * 1e3),
-                float(np.percentile(tracked, 99) * 1e3),
-                float(1.0 / np.percentile(tracked, 50)),
-            ],
-            [
-                "nearest (all leaves)",
-                counts,
-                float(np.percentile(scanned, 50) * 1e3),
-                float(np.percentile(scanned, 99) * 1e3),
-                float(1.0 / np.percentile(scanned, 50)),
-            ],
-        ]
-        tables["speed"] += [
-            [f"paper ({k}, average)", "57,136", v, "-", 1e3 / v] for k, v in PAPER_MS.items()
-        ]
-        print_table(
-            f"3. Speed per frame at 320x240, one core: {label}, {len(poses):,} poses; tree "
-            f"built in {build:.0f} s, {big.nbytes / 2**20:.0f} MiB of arrays, peak process "
-            f"memory {peak:.0f} MiB",
-            ["search", "nodes top / middle / leaves", "p50 ms", "p99 ms", "frames/s"],
-            tables["speed"],
-        )
     return tables
+
+
+def _speed_table(headings: float) -> list[list[object]]:
+    label, poses = large_database()
+    start = time.perf_counter()
+    big = ShapeTree.build(
+        poses, SilhouetteView(CAMERA), BODY, headings=np.arange(-180.0, 180.0, headings)
+    )
+    build = time.perf_counter() - start
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    tracked, scanned = speed(big, 1)
+    counts = " / ".join(f"{len(level):,}" for level in big.levels)
+    rows = [
+        [
+            "tracker",
+            counts,
+            float(np.percentile(tracked, 50) * 1e3),
+            float(np.percentile(tracked, 99) * 1e3),
+            float(1.0 / np.percentile(tracked, 50)),
+        ],
+        [
+            "nearest (all leaves)",
+            counts,
+            float(np.percentile(scanned, 50) * 1e3),
+            float(np.percentile(scanned, 99) * 1e3),
+            float(1.0 / np.percentile(scanned, 50)),
+        ],
+    ]
+    rows += [[f"paper ({k}, average)", "57,136", v, "-", 1e3 / v] for k, v in PAPER_MS.items()]
+    print_table(
+        f"3. Speed per frame at 320x240, one core: {label}, {len(poses):,} poses; tree "
+        f"built in {build:.0f} s, {big.nbytes / 2**20:.0f} MiB of arrays, peak process "
+        f"memory {peak:.0f} MiB",
+        ["search", "nodes top / middle / leaves", "p50 ms", "p99 ms", "frames/s"],
+        rows,
+    )
+    return rows
 
 
 def main() -> None:
@@ -239,9 +259,20 @@ def main() -> None:
     parser.add_argument("--takes", type=int, default=3, help="tree: takes per motion")
     parser.add_argument("--reps", type=int, default=2, help="held-out takes per motion")
     parser.add_argument("--sequences", type=int, default=24, help="Figure 4 sequences")
-    parser.add_argument("--no-large", action="store_true", help="skip the large tree")
+    parser.add_argument(
+        "--large-headings", type=float, default=15.0, help="large tree: heading step, degrees"
+    )
+    parser.add_argument("--tables", type=int, nargs="+", default=[1, 2, 3], choices=[1, 2, 3])
     args = parser.parse_args()
-    bench(args.takes, args.reps, args.sequences, not args.no_large)
+    small = bool({1, 2} & set(args.tables))
+    bench(
+        args.takes,
+        args.reps,
+        args.sequences,
+        3 in args.tables,
+        large_headings=args.large_headings,
+        small=small,
+    )
 
 
 if __name__ == "__main__":
