@@ -126,12 +126,9 @@ class MarkerPacket:
         """All fields equal; markers compared with NaN equal to NaN."""
         if not isinstance(other, MarkerPacket):
             return NotImplemented
-        return (self.camera, self.sequence, self.timestamp, self.session) == (
-            other.camera,
-            other.sequence,
-            other.timestamp,
-            other.session,
-        ) and np.array_equal(self.markers, other.markers, equal_nan=True)
+        return _header(self) == _header(other) and np.array_equal(
+            self.markers, other.markers, equal_nan=True
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,12 +158,7 @@ class PosePacket:
         """All fields equal."""
         if not isinstance(other, PosePacket):
             return NotImplemented
-        return (self.camera, self.sequence, self.timestamp, self.session) == (
-            other.camera,
-            other.sequence,
-            other.timestamp,
-            other.session,
-        ) and np.array_equal(self.pose, other.pose)
+        return _header(self) == _header(other) and np.array_equal(self.pose, other.pose)
 
 
 Packet = MarkerPacket | PosePacket
@@ -273,6 +265,11 @@ def read_key_file(path: str | Path) -> bytes:
             str(path), f"a key file holds at least {MIN_KEY_BYTES} bytes, this one {len(key)}"
         )
     return key
+
+
+def _header(packet: MarkerPacket | PosePacket) -> tuple[int, int, float, str]:
+    """The header fields every packet has, for comparisons."""
+    return packet.camera, packet.sequence, packet.timestamp, packet.session
 
 
 def _check_header(camera: object, sequence: object, timestamp: object, session: object) -> None:

@@ -1,5 +1,6 @@
-"""Shared fixtures: the real CMU data (skipped with a reason where absent), and the
-synthetic stage of the live service tests."""
+"""Shared fixtures: the real CMU data (skipped with a reason where absent), the
+synthetic stage of the live service tests, and the small shape tree of the silhouette
+tests."""
 
 from __future__ import annotations
 
@@ -7,9 +8,11 @@ import os
 from pathlib import Path
 
 import pytest
+from silhouette_fixtures import SmallBuild, build_small_tree
 
 from db.synthetic_store import build_synthetic_store
 from samba.calibration_file import write_calibration
+from samba.shape_tree import ShapeTree
 from service.synthetic_capture import SyntheticCapture
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,3 +67,15 @@ def live_calibration(
     path = tmp_path_factory.mktemp("calib") / "stage.toml"
     write_calibration(path, live_capture.cameras)
     return path
+
+
+@pytest.fixture(scope="session")
+def small_build() -> SmallBuild:
+    """The small tree of `silhouette_fixtures` with its inputs."""
+    return build_small_tree()
+
+
+@pytest.fixture(scope="session")
+def small_tree() -> ShapeTree:
+    """The small tree of `silhouette_fixtures`."""
+    return build_small_tree().tree

@@ -12,7 +12,6 @@ from silhouette_fixtures import (
     HEADINGS,
     HOME,
     SmallBuild,
-    build_small_tree,
     facing_angles,
     library_poses,
     view,
@@ -23,18 +22,6 @@ from samba.errors import InputError
 from samba.pose_selection import distinct_poses
 from samba.shape_tree import DEFAULT_RADII, LEVEL_SIZES, PART_JOINTS, ShapeTree
 from samba.silhouette_distance import downsampled
-
-
-@pytest.fixture(scope="module")
-def small_build() -> SmallBuild:
-    """The small tree of `silhouette_fixtures` with its inputs."""
-    return build_small_tree()
-
-
-@pytest.fixture(scope="module")
-def small_tree() -> ShapeTree:
-    """The small tree of `silhouette_fixtures`."""
-    return build_small_tree().tree
 
 
 def _descendants(tree: ShapeTree, level: int, node: int) -> np.ndarray:

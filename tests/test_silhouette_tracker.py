@@ -9,7 +9,6 @@ from silhouette_fixtures import (
     SQUAT_TAKE,
     TAKE_FRAMES,
     SmallBuild,
-    build_small_tree,
     facing_angles,
     source_poses,
 )
@@ -22,18 +21,6 @@ from samba.silhouette_render import render_silhouettes
 from samba.silhouette_tracker import SilhouetteTracker, TrackerSettings
 
 ARMS = (PART_NAMES.index("l_arm"), PART_NAMES.index("r_arm"))
-
-
-@pytest.fixture(scope="module")
-def small_build() -> SmallBuild:
-    """The small tree of `silhouette_fixtures` with its inputs."""
-    return build_small_tree()
-
-
-@pytest.fixture(scope="module")
-def small_tree() -> ShapeTree:
-    """The small tree of `silhouette_fixtures`."""
-    return build_small_tree().tree
 
 
 def _render(tree: ShapeTree, poses: np.ndarray) -> np.ndarray:
