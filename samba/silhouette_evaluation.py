@@ -45,9 +45,10 @@ def staged(
 ) -> np.ndarray:
     """A take's poses (n, 13, 3) m put in front of `view`'s camera: scaled to `height`
     m, turned about the vertical so that its first frame faces the camera (the player
-    faces the screen when the game starts) plus `turn_deg` degrees (90: the camera sees
-    its left side), moved so that its mean hip midpoint stands at the home point;
-    `in_place` also removes the hip midpoint's travel on the floor."""
+    faces the screen when the game starts) plus `turn_deg` degrees counterclockwise seen
+    from above (90: the camera sees its right side), moved so that its mean hip midpoint
+    stands at the home point; `in_place` also removes the hip midpoint's travel on the
+    floor."""
     poses = scaled_to(poses, height)
     root = poses[:, [7, 8]].mean(axis=1)
     if in_place:
@@ -57,7 +58,7 @@ def staged(
         root = root - travel
     centre = root.mean(axis=0)
     left = poses[0, 7] - poses[0, 8]
-    to_camera = view.camera.center - centre
+    to_camera = view.camera.center - view.home
     angle = (
         np.arctan2(to_camera[0], to_camera[2])
         - np.arctan2(-left[2], left[0])
