@@ -18,6 +18,12 @@ on an upper level stands for its leaves, so its part variances add the level's
 Nodes more than `log_margin` below the best score of their level, or beyond the
 `keep` best, are pruned with their subtrees.
 
+Beyond the paper's first-order model (Eq. 8), each part's Gaussian is centred
+`velocity_gain` of the last step ahead: the change between the best leaves of the two
+previous frames, so a limb that swings on keeps swinging rather than turning back (the
+silhouette of a limb swinging towards the camera is that of one swinging away);
+`velocity_gain` = 0 is the paper's model.
+
 The motion model is occlusion-aware (Eq. 9): a body part that is hidden in a
 previous leaf (its visible fraction below `occluded_below`) gets `occlusion_factor`
 times its standard deviation (the paper's m = 5), so it is free to jump to where it
@@ -70,6 +76,7 @@ class TrackerSettings:
     keep: tuple[int, ...] = (40, 120, 400)
     log_margin: float = 12.0
     part_cap: tuple[float, ...] = (40.0, 10.0, 10.0, 10.0, 10.0, 10.0)
+    velocity_gain: float = 0.5
     start_tolerance: float = 60.0
     posterior_size: int = 30
 
@@ -90,6 +97,8 @@ class TrackerSettings:
             raise InputError("keep", f"need {len(LEVEL_SIZES)} counts >= 1")
         if not (self.posterior_size >= 1 and self.upper_sigma_factor >= 1):
             raise InputError("posterior_size", "posterior_size and upper_sigma_factor >= 1")
+        if not 0.0 <= self.velocity_gain <= 1.0:
+            raise InputError("velocity_gain", f"must be in 0..1, got {self.velocity_gain}")
         if not (np.isfinite(self.log_margin) and self.log_margin > 0):
             raise InputError("log_margin", f"must be finite and > 0, got {self.log_margin}")
         if not (self.relative_sigma > 0 and 0 <= self.start_tolerance <= 180):
@@ -133,6 +142,7 @@ class SilhouetteTracker:
         """Forget the past: the next frame is searched with a uniform prior."""
         self._previous: np.ndarray | None = None  # leaf indices of the posterior
         self._weights = np.zeros(0)
+        self._best: list[int] = []  # the best leaf of the last two frames, oldest first
         self._last: SilhouetteEstimate | None = None
 
     def step(self, mask: np.ndarray) -> SilhouetteEstimate:
@@ -176,6 +186,7 @@ class SilhouetteTracker:
         self._weights = np.exp(scores[:best] - logsumexp(scores[:best]))
         leaves = self.tree.leaves
         leaf = int(nodes[0])
+        self._best = [*self._best[-1:], leaf]
         shift = placement.floor + leaves.floor_offsets[leaf] - self.tree.view.home
         shift[1] = 0.0
         estimate = SilhouetteEstimate(
@@ -218,6 +229,9 @@ class SilhouetteTracker:
         for part, cap in enumerate(settings.part_cap):
             a = mine[part][nodes]
             b = theirs[part][self._previous]
+            if len(self._best) == 2:
+                older, newer = theirs[part][self._best]
+                b = b + settings.velocity_gain * (newer - older)
             squared = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * a @ b.T
             penalty = 0.5 * np.maximum(squared, 0.0) / variance[None, :, part]
             log_density = log_density - np.minimum(penalty, cap)

@@ -104,7 +104,7 @@ def test_silhouette_benchmark_prints_accuracy_figure_4_and_speed(
     assert "1. Accuracy on held-out takes" in out and "2. Figure 4" in out
     (row,) = tables["accuracy"]
     assert row[:2] == [0.5, "wave"] and all(isinstance(v, float) for v in row[2:])
-    assert len(tables["figure4"]) == 6 and {r[2] + r[3] + r[4] for r in tables["figure4"]} == {1}
+    assert len(tables["figure4"]) == 7 and {r[3] + r[4] + r[5] for r in tables["figure4"]} == {1}
     tree, _ = bench_silhouette.synthetic_tree(1)
     tracked, scanned = bench_silhouette.speed(tree, 1)
     assert len(tracked) == 60 * len(bench_silhouette.MOTIONS) and len(scanned) > 0
