@@ -26,7 +26,10 @@ AREAS: dict[str, tuple[str, str]] = {
     "export": ("export.cli", "retarget takes to a humanoid avatar and write USD, glTF or BVH"),
     "serve": ("service.serve_cli", "live capture server: packets in; VMC, viewer, takes out"),
     "demo": ("service.demo", "a live capture end to end: server, two camera nodes, take, export"),
-    "node": ("service.node_cli", "camera node: track the 8 markers in frames and send them by UDP"),
+    "node": (
+        "service.node_cli",
+        "camera node: track the 8 markers (or, markerless, the body) in frames, send them by UDP",
+    ),
     "track-video": (
         "service.track_video_cli",
         "markerless capture from one camera: silhouettes tracked over the shape tree, as a take",
