@@ -63,7 +63,12 @@ class TrackerSettings:
     `relative_sigma` times the best distance of the level in the frame (a node 10 %
     worse than the best then costs about 1 nat, however noisy the frame). On the upper
     levels sigma is `upper_sigma_factor` times wider, as a node's silhouette only
-    stands for its leaves'. `keep` (per level): most nodes a level passes on.
+    stands for its leaves'. `keep` (per level): most nodes a level passes on;
+    `log_margin` (nats): how far below a level's best score a node is still passed on.
+    `occlusion_factor` (m of Eq. 9) widens parts visible below `occluded_below` (a
+    fraction of their area); `part_cap` (nats, per part), `velocity_gain` and
+    `start_tolerance` (degrees) are described in the module docstring;
+    `posterior_size` leaves carry the posterior to the next frame.
     """
 
     distance: str = "normalised"
