@@ -255,6 +255,8 @@ def _source_of(args: argparse.Namespace) -> str:
         raise InputError(" and ".join(f"--{name}" for name in given), "give only one source")
     source = given[0]
     for name, sources in _SCOPES.items():
+        if name == "height" and args.mode == "silhouette":
+            continue  # there it picks the body model, whatever the source
         if getattr(args, name) is not None and source not in sources:
             flag = "--" + name.replace("_", "-")
             raise InputError(flag, f"does not apply to --{source}")

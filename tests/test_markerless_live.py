@@ -12,7 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from live_fixtures import VmcReceiver, until
-from markerless_fixtures import BODY, CAMERA, FPS, footage, mpjpe_cm, write_camera_calibration
+from markerless_fixtures import (
+    BODY,
+    CAMERA,
+    FPS,
+    HEIGHT,
+    footage,
+    mpjpe_cm,
+    write_camera_calibration,
+)
 
 from db.shape_tree_file import read_shape_tree, tree_path, write_shape_tree
 from db.store import PoseStore
@@ -148,7 +156,7 @@ def test_samba_node_silhouette_sends_pose_packets(
         receiver.bind(("127.0.0.1", 0))
         receiver.settimeout(0.5)
         argv = ["node", "--mode", "silhouette", "--camera", "0", "--calib", str(calibration)]
-        argv += ["--db", str(store), "--body", BODY.name, "--synthetic", "wave"]
+        argv += ["--db", str(store), "--height", str(HEIGHT), "--synthetic", "wave"]
         argv += ["--seconds", "1", "--fps", str(FPS), "--no-pace", "--session", SESSION]
         argv += ["--server", f"127.0.0.1:{receiver.getsockname()[1]}"]
         assert main(argv) == 0
