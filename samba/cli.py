@@ -34,6 +34,10 @@ AREAS: dict[str, tuple[str, str]] = {
         "service.track_video_cli",
         "markerless capture from one camera: silhouettes tracked over the shape tree, as a take",
     ),
+    "capture-volume": (
+        "service.capture_volume_cli",
+        "model-free capture from several cameras: visual hull, derived skeleton, BVH",
+    ),
 }
 """Subcommand -> (module with `register(parser)`, one-line help)."""
 

@@ -64,10 +64,10 @@ def run(args: argparse.Namespace) -> int:
     camera = chosen_camera(args.calib, args.camera)
     view = SilhouetteView(camera, chosen_home(args))
     tree = tree_for(args.db, args.tree, view, chosen_body(args))
-    frames = _sized(open_frames(args.video).frames(), args.video, camera, args.calib)
+    frames = sized_frames(open_frames(args.video).frames(), args.video, camera, args.calib)
     if args.background:
         background = open_frames(args.background).frames()
-        empty = list(_sized(background, args.background, camera, args.calib))
+        empty = list(sized_frames(background, args.background, camera, args.calib))
     else:
         empty = list(itertools.islice(frames, args.empty_frames))
     extractor = SilhouetteExtractor.learn([frame for _, frame in empty], method=args.method)
@@ -119,7 +119,7 @@ def _track(
     return seconds, held
 
 
-def _sized(
+def sized_frames(
     frames: Iterator[tuple[int, np.ndarray]], source: str, camera: Camera, calibration: str
 ) -> Iterator[tuple[int, np.ndarray]]:
     """`frames` of `source`, checked to be of the image size of `camera` (of the file

@@ -108,3 +108,19 @@ def test_silhouette_benchmark_prints_accuracy_figure_4_and_speed(
     tree, _ = bench_silhouette.synthetic_tree(1)
     tracked, scanned = bench_silhouette.speed(tree, 1)
     assert len(tracked) == 60 * len(bench_silhouette.MOTIONS) and len(scanned) > 0
+
+
+_spec_volume = importlib.util.spec_from_file_location(
+    "bench_volume", ROOT / "bench" / "bench_volume.py"
+)
+bench_volume = importlib.util.module_from_spec(_spec_volume)
+_spec_volume.loader.exec_module(bench_volume)
+
+
+def test_volume_benchmark_prints_its_tables(capsys: pytest.CaptureFixture[str]) -> None:
+    humans = bench_volume.bench_humans([11], seconds=1.0)
+    creatures = bench_volume.bench_creatures([0], frames=8)
+    out = capsys.readouterr().out
+    assert "Human takes" in out and "Creatures" in out
+    assert [r[0] for r in humans] == ["jumping_jacks-11", "wave-11"]
+    assert [r[0] for r in creatures] == ["quadruped-0", "chain-0"]

@@ -1,0 +1,162 @@
+"""Pass 1 of model and motion capture (Chu, Jenkins, Matarić 2003, Section 4): the
+kinematic model of one frame from its skeleton curve and volume.
+
+Every branch of the skeleton curve (the path between two indicator nodes: root,
+branching nodes, leaves) is a kinematic link to start with. A branch is then cut into
+smaller links where its volume stops being linear: starting at the branch's parent
+node, skeleton points are included one by one, and when the voxels of the included
+points are skewed about the line from the first to the last included point (the
+sample skewness of their distances to that line exceeds a threshold), a joint is
+placed at the last point that kept them linear, which starts the next link.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from samba.spherical_shells import SkeletonCurve
+
+SKEWNESS = 0.0
+"""Skewness of the voxels' distances to the chord above which they are not linear. A
+uniformly filled straight cylinder gives about -0.57 (most volume at the surface);
+volume bulging to one side of the chord (a bend) pushes it up through 0."""
+MIN_VOXELS = 12
+"""Fewest voxels the skewness test is applied to."""
+
+
+@dataclass(frozen=True)
+class Branch:
+    """One branch of a frame's kinematic model.
+
+    `parent`: the branch ending where this one starts, -1 when it starts at the root.
+    `points` (p, 3) meters: the skeleton-curve points from the parent node to the end
+    node. `joints` (j,): the fractions (0..1) of the branch's arc length at which the
+    skewness test placed joints inside it, increasing.
+    """
+
+    parent: int
+    points: np.ndarray
+    joints: np.ndarray
+
+    @property
+    def length(self) -> float:
+        """Arc length of the branch, meters."""
+        return float(np.linalg.norm(np.diff(self.points, axis=0), axis=1).sum())
+
+    def at(self, fractions: np.ndarray) -> np.ndarray:
+        """Points (k, 3) meters at `fractions` (k,) of the arc length along the branch."""
+        steps = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
+        arc = np.concatenate([[0.0], np.cumsum(steps)])
+        target = np.asarray(fractions, dtype=np.float64) * arc[-1]
+        return np.stack([np.interp(target, arc, self.points[:, a]) for a in range(3)], axis=-1)
+
+
+@dataclass(frozen=True)
+class FrameModel:
+    """A frame's kinematic model: `root` (3,) meters and the `branches`, parents first."""
+
+    root: np.ndarray
+    branches: tuple[Branch, ...]
+
+    @property
+    def leaf_count(self) -> int:
+        """Branches no other branch starts from."""
+        parents = {b.parent for b in self.branches}
+        return sum(1 for i in range(len(self.branches)) if i not in parents)
+
+    def signature(self) -> str:
+        """A canonical string of the branch tree's shape (equal for isomorphic trees)."""
+        children: list[list[int]] = [[] for _ in range(len(self.branches) + 1)]
+        for i, branch in enumerate(self.branches):
+            children[branch.parent + 1].append(i + 1)
+
+        def encode(node: int) -> str:
+            return "(" + "".join(sorted(encode(c) for c in children[node])) + ")"
+
+        return encode(0)
+
+    def is_humanoid(self) -> bool:
+        """Five leaf branches (head, two arms, two legs) hanging off one trunk: the
+        branches that carry others form a single chain from the root, or the root is the
+        only branching point (a root with five branches)."""
+        if self.leaf_count != 5:
+            return False
+        carriers = sorted({b.parent for b in self.branches if b.parent >= 0})
+        starts_at_root = [i for i, b in enumerate(self.branches) if b.parent < 0]
+        trunk_from_root = [i for i in starts_at_root if i in carriers]
+        if len(trunk_from_root) > 2:
+            return False
+        for carrier in carriers:
+            inner = [c for c in carriers if self.branches[c].parent == carrier]
+            if len(inner) > 1:
+                return False
+        return True
+
+
+def frame_model(
+    curve: SkeletonCurve, positions: np.ndarray, skewness: float = SKEWNESS
+) -> FrameModel:
+    """The kinematic model of one frame from its refined skeleton `curve` and the
+    Euclidean centres `positions` (m, 3) meters of the voxels `curve.members` labels."""
+    children = curve.children()
+    indicator = {n for n, kids in enumerate(children) if n == 0 or len(kids) != 1}
+    order = np.argsort(curve.members, kind="stable")
+    bounds = np.searchsorted(curve.members[order], np.arange(len(curve.parents) + 1))
+    voxels = [positions[order[bounds[n] : bounds[n + 1]]] for n in range(len(curve.parents))]
+    branches: list[Branch] = []
+    ends: dict[int, int] = {}
+    stack = [(0, kid) for kid in reversed(children[0])]
+    while stack:
+        start, node = stack.pop()
+        path = [start, node]
+        while path[-1] not in indicator:
+            path.append(children[path[-1]][0])
+        end = path[-1]
+        points = curve.points[path]
+        branch = Branch(
+            parent=ends.get(start, -1),
+            points=points,
+            joints=_segment(points, [voxels[n] for n in path], skewness),
+        )
+        ends[end] = len(branches)
+        branches.append(branch)
+        stack.extend((end, kid) for kid in reversed(children[end]))
+    return FrameModel(root=curve.points[0].copy(), branches=tuple(branches))
+
+
+def _segment(points: np.ndarray, voxels: list[np.ndarray], threshold: float) -> np.ndarray:
+    """Fractions of arc length where the skewness test cuts a branch with curve `points`
+    (p, 3) and per-point voxels."""
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(steps)])
+    if arc[-1] <= 0:
+        return np.zeros(0)
+    cuts: list[float] = []
+    first = 0
+    for last in range(2, len(points)):
+        inside = np.concatenate(voxels[first + 1 : last + 1])
+        if len(inside) < MIN_VOXELS:
+            continue
+        if linear_skewness(inside, points[first], points[last]) > threshold:
+            cuts.append(arc[last - 1] / arc[-1])
+            first = last - 1
+    return np.asarray(cuts)
+
+
+def linear_skewness(voxels: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Sample skewness of the distances of `voxels` (k, 3) to the line through `a` and
+    `b` (3,): about -0.57 for a filled cylinder around the line, rising as the volume
+    leaves it to one side."""
+    axis = b - a
+    norm = np.linalg.norm(axis)
+    if norm == 0:
+        return 0.0
+    offset = voxels - a
+    along = offset @ (axis / norm)
+    distance = np.linalg.norm(offset - along[:, None] * (axis / norm), axis=1)
+    spread = distance.std()
+    if spread == 0:
+        return 0.0
+    return float(np.mean((distance - distance.mean()) ** 3) / spread**3)

@@ -1,0 +1,167 @@
+"""Passes 2 and 3 of model and motion capture (Chu, Jenkins, Matarić 2003, Section 4):
+one kinematic model common to a whole volume sequence, fitted to every frame.
+
+Pass 2 aligns the frames' models: the branch tree seen in most frames is the common
+topology, and the first frame that has it is the reference. Walking from there to both
+ends of the sequence, each frame's branches are matched to the model's branches as
+last seen (one-to-one, by the Hungarian method, minimising the summed squared
+distance between the two branches resampled at the same fractions of their length:
+the distance of their parents, their directions and their lengths in one number).
+Then, per model branch, the joint fractions the skewness test placed in the matched
+frames form a 1-D sample; the branch gets the rounded mean number of joints, placed at
+the highest peaks of the sample's density, and the mean length of its matches.
+
+Pass 3 places the model's joints on every frame's matched branches at those
+fractions. Joints of branches a frame lacks are interpolated in time between the
+frames that have them (held at the ends of the sequence).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import gaussian_kde
+
+from samba.errors import InputError
+from samba.frame_kinematics import Branch, FrameModel
+
+RESAMPLE = np.linspace(0.0, 1.0, 6)
+"""Fractions of arc length at which two branches are compared."""
+MATCH_GATE = 0.25
+"""RMS distance (m) of resampled points above which two branches do not match."""
+BANDWIDTH = 0.04
+"""Kernel width (fraction of the branch) of the joint-fraction density."""
+
+
+@dataclass(frozen=True)
+class CommonModel:
+    """The kinematic model of a sequence.
+
+    `parents` (B,): parent branch of each branch, -1 at the root; `lengths` (B,) mean
+    arc length, meters; `joints`: per branch, the fractions (0..1, increasing) of its
+    length where its interior joints sit. `signature` is the branch tree's canonical
+    shape (`FrameModel.signature`).
+    """
+
+    parents: tuple[int, ...]
+    lengths: np.ndarray
+    joints: tuple[np.ndarray, ...]
+    signature: str
+
+    @property
+    def branch_count(self) -> int:
+        """Branches that carry no other branch (ends of the skeleton)."""
+        return sum(1 for b in range(len(self.parents)) if b not in self.parents)
+
+    @property
+    def link_count(self) -> int:
+        """Kinematic links: one per branch plus one per interior joint."""
+        return len(self.parents) + sum(len(j) for j in self.joints)
+
+
+@dataclass(frozen=True)
+class SequenceFit:
+    """The common model and its fit: `model`, `matches` (n, B) the frame branch matched
+    to each model branch (-1 where none), `root` (n, 3) and `branch_points` (n, B,
+    J_b + 1, 3) per branch the interior joints then the end, meters (a list of arrays,
+    one per branch)."""
+
+    model: CommonModel
+    matches: np.ndarray
+    root: np.ndarray
+    branch_points: tuple[np.ndarray, ...]
+
+    @property
+    def complete(self) -> np.ndarray:
+        """(n,) bool: frames in which every model branch was matched."""
+        return (self.matches >= 0).all(axis=1)
+
+
+def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
+    """Passes 2 and 3 over the per-frame models of a sequence (see the module)."""
+    if not frames:
+        raise InputError("volume sequence", "no frames to build a model from")
+    signatures = [f.signature() for f in frames]
+    values, counts = np.unique(signatures, return_counts=True)
+    signature = str(values[np.argmax(counts)])
+    reference = signatures.index(signature)
+    base = frames[reference]
+    n, count = len(frames), len(base.branches)
+    matches = np.full((n, count), -1, dtype=np.int64)
+    matches[reference] = np.arange(count)
+    for direction in (1, -1):
+        last = [b.points for b in base.branches]
+        for t in range(reference + direction, n if direction > 0 else -1, direction):
+            matches[t] = _match(last, frames[t].branches)
+            for b, found in enumerate(matches[t]):
+                if found >= 0:
+                    last[b] = frames[t].branches[found].points
+    joints, lengths = [], np.zeros(count)
+    for b in range(count):
+        matched = [frames[t].branches[matches[t, b]] for t in range(n) if matches[t, b] >= 0]
+        lengths[b] = np.mean([m.length for m in matched])
+        joints.append(_joint_peaks(matched))
+    model = CommonModel(
+        parents=tuple(b.parent for b in base.branches),
+        lengths=lengths,
+        joints=tuple(joints),
+        signature=signature,
+    )
+    root = np.stack([f.root for f in frames])
+    points = []
+    for b in range(count):
+        fractions = np.append(model.joints[b], 1.0)
+        placed = np.full((n, len(fractions), 3), np.nan)
+        for t in range(n):
+            if matches[t, b] >= 0:
+                placed[t] = frames[t].branches[matches[t, b]].at(fractions)
+        points.append(_fill_in_time(placed))
+    return SequenceFit(model=model, matches=matches, root=root, branch_points=tuple(points))
+
+
+def _match(last: list[np.ndarray], branches: tuple[Branch, ...]) -> np.ndarray:
+    """Frame branch (B,) matched to each model branch last seen as curves `last`."""
+    out = np.full(len(last), -1, dtype=np.int64)
+    if not branches:
+        return out
+    model = np.stack([_resampled(points) for points in last])
+    frame = np.stack([b.at(RESAMPLE) for b in branches])
+    cost = np.sqrt(((model[:, None] - frame[None]) ** 2).sum(-1).mean(-1))
+    rows, cols = linear_sum_assignment(cost)
+    good = cost[rows, cols] <= MATCH_GATE
+    out[rows[good]] = cols[good]
+    return out
+
+
+def _resampled(points: np.ndarray) -> np.ndarray:
+    """A curve's points (p, 3) at `RESAMPLE` fractions of its arc length."""
+    return Branch(parent=-1, points=points, joints=np.zeros(0)).at(RESAMPLE)
+
+
+def _joint_peaks(matched: list[Branch]) -> np.ndarray:
+    """The model's joint fractions of a branch from its matches in every frame."""
+    count = int(np.round(np.mean([len(m.joints) for m in matched])))
+    sample = np.concatenate([m.joints for m in matched])
+    if count == 0 or len(sample) == 0:
+        return np.zeros(0)
+    grid = np.linspace(0.0, 1.0, 201)
+    if np.ptp(sample) == 0:
+        return np.full(min(count, 1), sample[0])
+    density = gaussian_kde(sample, bw_method=BANDWIDTH / sample.std())(grid)
+    peak = np.flatnonzero((density[1:-1] >= density[:-2]) & (density[1:-1] > density[2:])) + 1
+    best = peak[np.argsort(density[peak])[::-1][:count]]
+    return np.sort(grid[best])
+
+
+def _fill_in_time(placed: np.ndarray) -> np.ndarray:
+    """(n, k, 3) positions with NaN frames linearly interpolated in time between the
+    known frames, held at the ends; all NaN stays NaN."""
+    known = np.flatnonzero(np.isfinite(placed[:, 0, 0]))
+    if len(known) == 0 or len(known) == len(placed):
+        return placed
+    t = np.arange(len(placed))
+    flat = placed[known].reshape(len(known), -1)
+    filled = np.stack([np.interp(t, known, flat[:, i]) for i in range(flat.shape[1])], axis=1)
+    return filled.reshape(placed.shape)

@@ -1,0 +1,108 @@
+"""The 13 joints of a human from a model-free volumetric capture
+(`samba.volume_capture`), when the derived model has human topology.
+
+Of the common model's five leaf branches, the two whose ends are lowest on average are
+the legs, the shortest of the other three is the head and the remaining two are the
+arms; left and right come from the subject's facing direction in the first frame
+(given by the user: the volume alone cannot tell front from back). Each limb is the
+polyline from its branch's start (the root or a branching node: the top of the trunk
+for arms and head, the crotch for legs) through the model's joints to its end (the
+tip of the hand, foot or head). A capture joint sits at a fixed fraction of that
+polyline's length (`LIMB_FRACTIONS`, the joint's place on the limb of the capsule
+body), except elbows and knees, which take the model's own joint nearest that
+fraction when one lies within `SNAP` of it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from samba.errors import InputError
+from samba.sequence_model import SequenceFit
+from samba.skeleton import N_JOINTS
+
+LIMB_FRACTIONS: dict[str, tuple[float, ...]] = {
+    "arm": (0.19, 0.51, 0.80),
+    "leg": (0.08, 0.50, 0.88),
+    "head": (0.35,),
+}
+"""Fractions of a limb's length from its branch start: arm (shoulder, elbow, wrist),
+leg (hip, knee, ankle), head (the head joint)."""
+SNAP = 0.12
+"""Largest distance (fraction of the limb) from an elbow's or knee's nominal place to
+a model joint that replaces it."""
+_JOINTS = {
+    ("arm", 1): (1, 3, 5),
+    ("arm", -1): (2, 4, 6),
+    ("leg", 1): (7, 9, 11),
+    ("leg", -1): (8, 10, 12),
+}
+"""(limb, side: +1 left, -1 right) -> the capture joints along it, in fraction order."""
+
+
+def humanoid_joints(fit: SequenceFit, facing: np.ndarray) -> np.ndarray:
+    """The 13 capture joints (n, 13, 3) meters of a fit with five leaf branches.
+
+    `facing` (3,) is the subject's forward direction in the first frame (only its
+    horizontal part counts); the subject's left is up x facing. Raises `InputError`
+    when the model does not have five leaf branches.
+    """
+    model = fit.model
+    leaves = [b for b in range(len(model.parents)) if b not in model.parents]
+    if len(leaves) != 5:
+        raise InputError(
+            "volume sequence",
+            f"the derived model has {len(leaves)} end branches, not a human's 5 "
+            "(head, two arms, two legs)",
+        )
+    forward = np.asarray(facing, dtype=np.float64) * np.array([1.0, 0.0, 1.0])
+    if not np.linalg.norm(forward) > 0:
+        raise InputError("--facing", f"needs a horizontal direction, got {facing!r}")
+    left = np.cross([0.0, 1.0, 0.0], forward / np.linalg.norm(forward))
+    limbs = {b: _limb(fit, b) for b in leaves}
+    ends = {b: limbs[b][:, -1] for b in leaves}
+    lengths = {b: np.linalg.norm(np.diff(limbs[b], axis=1), axis=-1).sum(-1).mean() for b in leaves}
+    legs = sorted(leaves, key=lambda b: ends[b][:, 1].mean())[:2]
+    rest = [b for b in leaves if b not in legs]
+    head = min(rest, key=lambda b: lengths[b])
+    arms = [b for b in rest if b != head]
+    joints = np.zeros((len(fit.root), N_JOINTS, 3))
+    joints[:, 0] = _at(limbs[head], LIMB_FRACTIONS["head"][0])
+    for kind, pair in (("arm", arms), ("leg", legs)):
+        side = np.sign((ends[pair[0]][0] - ends[pair[1]][0]) @ left) or 1.0
+        for branch, sign in zip(pair, (side, -side), strict=True):
+            polyline = limbs[branch]
+            fractions = LIMB_FRACTIONS[kind]
+            targets = _JOINTS[(kind, int(sign))]
+            inner = _model_joint_fractions(fit, branch, polyline)
+            for k, (joint, fraction) in enumerate(zip(targets, fractions, strict=True)):
+                snapped = k == 1 and len(inner) and np.min(np.abs(inner - fraction)) <= SNAP
+                place = inner[np.argmin(np.abs(inner - fraction))] if snapped else fraction
+                joints[:, joint] = _at(polyline, float(place))
+    return joints
+
+
+def _limb(fit: SequenceFit, branch: int) -> np.ndarray:
+    """(n, k, 3) the branch's start then its model joints and end, meters."""
+    parent = fit.model.parents[branch]
+    start = fit.root if parent < 0 else fit.branch_points[parent][:, -1]
+    return np.concatenate([start[:, None], fit.branch_points[branch]], axis=1)
+
+
+def _model_joint_fractions(fit: SequenceFit, branch: int, polyline: np.ndarray) -> np.ndarray:
+    """Fractions of the limb polyline's length at its interior model joints (frame mean)."""
+    steps = np.linalg.norm(np.diff(polyline, axis=1), axis=-1)
+    arc = np.cumsum(steps, axis=1) / np.maximum(steps.sum(axis=1, keepdims=True), 1e-12)
+    return arc[:, : len(fit.model.joints[branch])].mean(axis=0)
+
+
+def _at(polyline: np.ndarray, fraction: float) -> np.ndarray:
+    """(n, 3) points at `fraction` of each frame's polyline (n, k, 3) length."""
+    steps = np.linalg.norm(np.diff(polyline, axis=1), axis=-1)
+    arc = np.concatenate([np.zeros((len(steps), 1)), np.cumsum(steps, axis=1)], axis=1)
+    target = fraction * arc[:, -1]
+    segment = np.clip((arc[:, 1:-1] < target[:, None]).sum(axis=1), 0, steps.shape[1] - 1)
+    frame = np.arange(len(polyline))
+    t = (target - arc[frame, segment]) / np.maximum(steps[frame, segment], 1e-12)
+    start = polyline[frame, segment]
+    return start + np.clip(t, 0.0, 1.0)[:, None] * (polyline[frame, segment + 1] - start)

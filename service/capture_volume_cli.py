@@ -1,0 +1,284 @@
+"""`samba capture-volume VIDEO... --calib FILE -o TAKE.bvh`: model-free capture from several
+calibrated cameras (Chu, Jenkins, Matarić): visual hull, derived skeleton, BVH.
+
+One video or image folder per camera, in the order of the cameras in the calibration,
+is read in lockstep (the take ends with the shortest). Each camera's empty stage comes
+from `--background` (one video or folder per camera) or from the first
+`--empty-frames` frames of its video. Every frame's silhouettes
+(`samba.silhouette_extraction`) are carved into a voxel volume (`samba.visual_hull`);
+the take runs from the first to the last frame with somebody in the volume. The
+volumes give a kinematic model common to the take and its joint angles
+(`samba.volume_capture`), written as BVH; with `--joints`, a human model's 13 capture
+joints (`samba.volume_humanoid`) go to a NumPy archive too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from export.bvh_writer import UNITS, BvhSkeleton, write_bvh_motion
+from samba.atomic_file import atomic_path
+from samba.calibration_file import read_calibration
+from samba.camera import CameraGroup
+from samba.cli_arguments import finite_float, natural, positive, positive_float
+from samba.errors import InputError
+from samba.frame_source import open_frames
+from samba.silhouette_extraction import BACKGROUND_METHODS, SilhouetteExtractor
+from samba.skeleton import JOINT_NAMES
+from samba.visual_hull import VisualHull
+from samba.volume_capture import MIN_VOXELS, KinematicMotion, VolumeCapture, capture_volumes
+from samba.volume_humanoid import humanoid_joints
+from samba.voxel_grid import VoxelGrid
+from service.track_video_cli import sized_frames
+
+DEFAULT_BOUNDS = (-1.0, 0.0, -1.0, 1.0, 2.1, 1.0)
+"""Capture volume (x0, y0, z0, x1, y1, z1) m: 2 x 2 m of floor, 2.1 m high."""
+HUMAN_END_BRANCHES = 5
+"""End branches of a model `humanoid_joints` takes: head, two arms, two legs."""
+
+Frames = Iterator[tuple[int, np.ndarray]]
+"""One camera's (frame number, BGR uint8 image (H, W, 3)) in order."""
+
+
+def register(parser: argparse.ArgumentParser) -> None:
+    """Add the `capture-volume` arguments to `parser`."""
+    parser.add_argument(
+        "videos",
+        nargs="+",
+        metavar="VIDEO",
+        help="video file or image folder of each camera, in the order of the cameras in --calib",
+    )
+    parser.add_argument("--calib", required=True, help="camera calibration TOML")
+    parser.add_argument("-o", "--out", required=True, help="motion to write (.bvh)")
+    stage = parser.add_mutually_exclusive_group(required=True)
+    stage.add_argument(
+        "--background",
+        nargs="+",
+        metavar="DIR_OR_VIDEO",
+        help="video or image folder of the empty stage, one per camera in camera order",
+    )
+    stage.add_argument(
+        "--empty-frames",
+        type=natural,
+        metavar="N",
+        help="the first N frames of each VIDEO show the empty stage",
+    )
+    parser.add_argument(
+        "--method", choices=BACKGROUND_METHODS, default="colour", help="background model"
+    )
+    parser.add_argument(
+        "--bounds",
+        nargs=6,
+        type=finite_float,
+        default=DEFAULT_BOUNDS,
+        metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
+        help="capture volume corners, meters (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--voxel",
+        type=positive_float,
+        default=0.03,
+        metavar="M",
+        help="voxel edge, meters (default: 0.03)",
+    )
+    parser.add_argument(
+        "--min-views",
+        type=positive,
+        metavar="N",
+        help="cameras whose silhouette must hold a voxel to keep it (default: all)",
+    )
+    parser.add_argument(
+        "--fps", type=positive_float, default=30.0, help="frame rate of the videos (default: 30)"
+    )
+    parser.add_argument(
+        "--lowpass", type=positive_float, metavar="HZ", help="low-pass the joint angles at HZ"
+    )
+    parser.add_argument("--unit", choices=UNITS, default="m", help="BVH length unit (default: m)")
+    parser.add_argument(
+        "--joints", metavar="FILE.npz", help="also write the 13 capture joints of a human model"
+    )
+    parser.add_argument(
+        "--facing",
+        nargs=2,
+        type=finite_float,
+        default=(0.0, 1.0),
+        metavar=("X", "Z"),
+        help="the subject's forward direction in the first frame (default: +Z)",
+    )
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Capture the videos and write the BVH (and the joints); print what was done. A run
+    that fails leaves no output file behind."""
+    out = Path(args.out)
+    _check_output(out, ".bvh", "the motion is written as BVH: give a .bvh file name")
+    joints_out = Path(args.joints) if args.joints else None
+    if joints_out is not None:
+        _check_output(joints_out, ".npz", "the joints are written as a NumPy .npz archive")
+    cameras = read_calibration(args.calib)
+    _check_per_camera(args.videos, "videos", cameras, args.calib)
+    if args.min_views is not None and args.min_views > len(cameras):
+        raise InputError(
+            "--min-views",
+            f"{args.min_views} is more than the {len(cameras)} cameras of {args.calib}",
+        )
+    bounds = np.reshape(args.bounds, (2, 3))
+    try:
+        grid = VoxelGrid.from_bounds(bounds[0], bounds[1], args.voxel)
+    except InputError as exc:
+        raise InputError("--bounds", exc.problem) from None
+    streams = [
+        sized_frames(open_frames(video).frames(), video, camera, args.calib)
+        for video, camera in zip(args.videos, cameras, strict=True)
+    ]
+    extractors = _extractors(args, streams, cameras)
+    first, volumes = _carve(streams, extractors, VisualHull(grid, cameras), args.min_views)
+    if not volumes:
+        raise InputError(
+            ", ".join(args.videos),
+            f"nobody was seen in the volume in any frame (none carves {MIN_VOXELS} voxels)",
+        )
+    capture = capture_volumes(np.stack(volumes), grid, args.fps)
+    motion = capture.motion if args.lowpass is None else capture.motion.lowpassed(args.lowpass)
+    joints = None
+    if joints_out is not None and capture.fit.model.branch_count == HUMAN_END_BRANCHES:
+        facing = np.array([args.facing[0], 0.0, args.facing[1]])
+        joints = humanoid_joints(capture.fit, facing)
+    _write(out, motion, args.unit, joints_out, joints)
+    note = ""
+    if joints_out is not None and joints is None:
+        note = (
+            f"; not humanoid ({capture.fit.model.branch_count} end branches, not "
+            f"{HUMAN_END_BRANCHES}): {joints_out} not written"
+        )
+    elif joints_out is not None:
+        note = f", 13 joints -> {joints_out}"
+    print(_summary(capture, volumes, first, out) + note)
+    return 0
+
+
+def _summary(capture: VolumeCapture, volumes: list[np.ndarray], first: int, out: Path) -> str:
+    """The line telling what was captured from `volumes` (nx, ny, nz) bool, the first
+    from video frame `first`, and written to `out`."""
+    model, times = capture.fit.model, capture.times
+    voxels = np.median([volume.sum() for volume in volumes])
+    return (
+        f"capture-volume: {len(volumes)} frames (video frames {first}.."
+        f"{first + len(volumes) - 1}), {voxels:,.0f} voxels per frame (median), model of "
+        f"{model.branch_count} branches, {model.link_count} links {model.signature}, "
+        f"humanoid in {capture.humanoid_rate:.0%} of frames, {np.median(times.total):.2f} s "
+        f"per frame (median; Isomap {times.isomap.sum() / times.total.sum():.0%}) -> {out}"
+    )
+
+
+def _check_output(path: Path, suffix: str, problem: str) -> None:
+    """`InputError` naming `path` unless it is a new file with `suffix` in an existing
+    folder (`problem` says what the suffix is for)."""
+    if path.suffix.lower() != suffix:
+        raise InputError(str(path), problem)
+    if path.exists():
+        raise InputError(str(path), "already exists; captures are never overwritten")
+    if not path.resolve().parent.is_dir():
+        raise InputError(str(path), "its folder does not exist")
+
+
+def _check_per_camera(
+    sources: Sequence[str], what: str, cameras: CameraGroup, calibration: str
+) -> None:
+    """`InputError` naming `calibration` unless there is one of `sources` (`what` they
+    are, plural) per camera of `cameras`."""
+    if len(sources) != len(cameras):
+        raise InputError(
+            calibration,
+            f"has {len(cameras)} cameras ({', '.join(cameras.names)}) but got {len(sources)} "
+            f"{what}; give one per camera, in camera order",
+        )
+
+
+def _extractors(
+    args: argparse.Namespace, streams: list[Frames], cameras: CameraGroup
+) -> list[SilhouetteExtractor]:
+    """Each camera's silhouette extractor (`--method`), learnt from its empty stage: its
+    `--background` (checked against the camera's image size) or the first
+    `--empty-frames` frames taken from its stream. An `InputError` names the video or
+    background it comes from."""
+    if args.background:
+        _check_per_camera(args.background, "--background videos", cameras, args.calib)
+        sources = args.background
+        stages = [
+            sized_frames(open_frames(source).frames(), source, camera, args.calib)
+            for source, camera in zip(sources, cameras, strict=True)
+        ]
+    else:
+        sources = args.videos
+        stages = [itertools.islice(stream, args.empty_frames) for stream in streams]
+    extractors = []
+    for source, stage in zip(sources, stages, strict=True):
+        empty = [frame for _, frame in stage]
+        try:
+            extractors.append(SilhouetteExtractor.learn(empty, method=args.method))
+        except InputError as exc:
+            raise InputError(source, f"{exc.source}: {exc.problem}") from None
+    return extractors
+
+
+def _carve(
+    streams: list[Frames],
+    extractors: list[SilhouetteExtractor],
+    hull: VisualHull,
+    min_views: int | None,
+) -> tuple[int, list[np.ndarray]]:
+    """The volumes (nx, ny, nz) bool of the frames read in lockstep from `streams` until
+    the shortest ends, from the first to the last with at least `MIN_VOXELS` voxels
+    (somebody in the volume), and the frame number of the first of them."""
+    first, volumes, counts = 0, [], []
+    for frames in zip(*streams, strict=False):
+        silhouettes = [
+            extractor.silhouette(frame)
+            for extractor, (_, frame) in zip(extractors, frames, strict=True)
+        ]
+        volume = hull.carve(silhouettes, min_views)
+        count = int(volume.sum())
+        if not volumes:
+            if count < MIN_VOXELS:
+                continue  # nobody in the volume yet
+            first = frames[0][0]
+        volumes.append(volume)
+        counts.append(count)
+    while counts and counts[-1] < MIN_VOXELS:  # the subject has left
+        counts.pop()
+        volumes.pop()
+    return first, volumes
+
+
+def _write(
+    out: Path,
+    motion: KinematicMotion,
+    unit: str,
+    joints_out: Path | None,
+    joints: np.ndarray | None,
+) -> None:
+    """Write `motion` to the BVH file `out` with lengths in `unit` (an End Site closing
+    each leaf link, its length in meters along the link's Z axis), then, when given,
+    `joints` (n, 13, 3) m to the archive `joints_out` (arrays `joints`, `names` (13,)
+    and `fps`). Both atomically; a failure leaves neither file."""
+    skeleton = BvhSkeleton(
+        motion.names,
+        motion.parents,
+        motion.offsets,
+        end_sites={leaf: np.array([0.0, 0.0, motion.lengths[leaf]]) for leaf in motion.leaves},
+    )
+    try:
+        write_bvh_motion(out, skeleton, motion.rotations, motion.root, motion.fps, unit)
+        if joints_out is not None and joints is not None:
+            with atomic_path(joints_out) as tmp, open(tmp, "wb") as file:
+                np.savez(file, joints=joints, names=np.array(JOINT_NAMES), fps=motion.fps)
+    except BaseException:
+        out.unlink(missing_ok=True)
+        raise

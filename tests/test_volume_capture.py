@@ -1,0 +1,126 @@
+"""Model-free volumetric capture (issue 8): Isomap, spherical shells, frame and
+sequence models, posing, the humanoid mapping, on synthetic volumes with known truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from samba.articulated_figure import long_chain, quadruped
+from samba.errors import InputError
+from samba.isomap import VoxelGraph, isomap
+from samba.spherical_shells import sweep_and_prune
+from samba.volume_capture import capture_volumes
+from samba.volume_evaluation import creature_take, exaggerated, human_take
+from samba.voxel_grid import VoxelGrid
+
+
+def _box(low: tuple[int, int, int], high: tuple[int, int, int]) -> np.ndarray:
+    """Grid indices (m, 3) of the voxels low..high - 1."""
+    axes = [np.arange(a, b) for a, b in zip(low, high, strict=True)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def test_sweep_and_prune_splits_at_gaps_on_any_axis() -> None:
+    near = _box((0, 0, 0), (3, 3, 3)).astype(float)
+    apart_in_x = near + np.array([10.0, 0.0, 0.0])
+    apart_in_z = near + np.array([0.0, 0.0, 6.0])
+    labels = sweep_and_prune(np.concatenate([near, apart_in_x, apart_in_z]), np.full(3, 2.0))
+    assert len(np.unique(labels)) == 3
+    assert len(np.unique(labels[:27])) == 1 and len(np.unique(labels[27:54])) == 1
+    touching = sweep_and_prune(
+        np.concatenate([near, near + np.array([2.5, 0.0, 0.0])]), np.full(3, 2.0)
+    )
+    assert len(np.unique(touching)) == 1
+
+
+def test_voxel_graph_joins_26_neighbours_and_orders_components() -> None:
+    cube = _box((0, 0, 0), (3, 3, 3))
+    far = _box((10, 0, 0), (12, 1, 1))
+    graph = VoxelGraph.from_indices(np.concatenate([far, cube]))
+    degree = np.diff(graph.edges.indptr)
+    centre = len(far) + 13  # voxel (1, 1, 1) of the cube
+    assert degree[centre] == 26
+    assert graph.edges[centre].max() == pytest.approx(np.sqrt(3.0))
+    assert (graph.component[len(far) :] == 0).all() and (graph.component[: len(far)] == 1).all()
+    with pytest.raises(InputError, match="voxel indices"):
+        VoxelGraph.from_indices(np.zeros((4, 2), dtype=int))
+    with pytest.raises(InputError, match="not connected"):
+        isomap(graph)
+
+
+def test_isomap_unfolds_a_bent_bar_to_its_length() -> None:
+    along = _box((0, 0, 0), (40, 4, 4))
+    up = _box((36, 4, 0), (40, 34, 4))
+    graph = VoxelGraph.from_indices(np.concatenate([along, up]))
+    points = isomap(graph).points
+    span = np.ptp(points @ np.linalg.svd(points, full_matrices=False)[2][0])
+    assert span == pytest.approx(40 + 34 - 4, rel=0.1)  # the path along the bar, not 50
+
+
+def test_long_chain_gives_two_ends_and_its_links() -> None:
+    report = creature_take(
+        long_chain(6), "chain", seed=0, frames=16, bounds=((-1, 0, -1), (1, 0.8, 1))
+    )
+    assert report.model_ends == report.true_ends == 2
+    assert abs(report.model_links - report.true_links) <= 1
+    assert report.joints_found >= 0.7
+
+
+def test_quadruped_branches_are_recovered() -> None:
+    report = creature_take(quadruped(), "quadruped", seed=0, frames=16)
+    assert report.model_ends == report.true_ends == 6
+    assert report.model_links >= report.true_links  # over-segmented, never under
+    assert report.joints_found >= 0.4
+
+
+def test_posed_model_keeps_the_measured_directions() -> None:
+    report = creature_take(
+        long_chain(4), "chain", seed=1, frames=12, bounds=((-1, 0, -1), (1, 0.8, 1))
+    )
+    motion = report.capture.motion
+    forward, measured = motion.forward(), motion.positions
+    assert forward.shape == measured.shape
+    assert np.allclose(forward[:, 0], measured[:, 0])
+    # Fixed link lengths (the sequence means) against each frame's measured curve.
+    assert np.median(np.linalg.norm(forward - measured, axis=-1)) < 0.05
+    smooth = motion.lowpassed(2.0)
+    jitter = np.abs(np.diff(smooth.rotations, 2, axis=0)).mean()
+    assert jitter < np.abs(np.diff(motion.rotations, 2, axis=0)).mean()
+    assert np.allclose(np.linalg.norm(smooth.rotations, axis=-1), 1.0)
+    with pytest.raises(InputError, match="--lowpass"):
+        motion.lowpassed(100.0)
+
+
+def test_human_wave_has_human_topology_and_maps_to_13_joints() -> None:
+    report = human_take("wave", seed=1, seconds=1.5)
+    assert report.separated.all()
+    assert report.humanoid.mean() >= 0.9
+    assert report.capture.fit.model.branch_count == 5
+    assert np.nanmean(report.errors) < 12.0  # cm
+
+
+def test_exaggerated_poses_keep_bone_lengths() -> None:
+    from samba.synthetic import generate
+
+    poses = generate("jumping_jacks", 1.0, 10.0, seed=4).poses.astype(np.float64)
+    spread = exaggerated(poses)
+    bones = [(1, 3), (3, 5), (2, 4), (4, 6), (7, 9), (9, 11), (8, 10), (10, 12)]
+    for a, b in bones:
+        before = np.linalg.norm(poses[:, a] - poses[:, b], axis=-1)
+        assert np.allclose(np.linalg.norm(spread[:, a] - spread[:, b], axis=-1), before)
+    assert np.allclose(spread[:, [0, 1, 2, 7, 8]], poses[:, [0, 1, 2, 7, 8]])
+    feet = np.linalg.norm(spread[:, 11] - spread[:, 12], axis=-1)
+    assert (feet > np.linalg.norm(poses[:, 11] - poses[:, 12], axis=-1)).all()
+
+
+def test_empty_and_malformed_volumes_are_named() -> None:
+    grid = VoxelGrid(np.zeros(3), 0.05, (10, 10, 10))
+    volumes = np.zeros((2, 10, 10, 10), dtype=bool)
+    volumes[:, 2:8, 2:8, 2:8] = True
+    volumes[1] = False
+    volumes[1, 0, 0, 0] = True
+    with pytest.raises(InputError, match="frame 1"):
+        capture_volumes(volumes, grid, 10.0)
+    with pytest.raises(InputError, match="volumes must be"):
+        capture_volumes(volumes[:, :5], grid, 10.0)
