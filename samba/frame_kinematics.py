@@ -101,7 +101,7 @@ def frame_model(
     """The kinematic model of one frame from its refined skeleton `curve` and the
     Euclidean centres `positions` (m, 3) meters of the voxels `curve.members` labels."""
     children = curve.children()
-    indicator = {n for n, kids in enumerate(children) if n == 0 or len(kids) != 1}
+    indicator = curve.indicator_nodes()
     order = np.argsort(curve.members, kind="stable")
     bounds = np.searchsorted(curve.members[order], np.arange(len(curve.parents) + 1))
     voxels = [positions[order[bounds[n] : bounds[n + 1]]] for n in range(len(curve.parents))]

@@ -70,13 +70,9 @@ class SkeletonCurve:
                 out[parent].append(node)
         return out
 
-    def leaves(self) -> list[int]:
-        """Nodes without children."""
-        return [node for node, kids in enumerate(self.children()) if not kids]
-
-    def indicator_nodes(self) -> list[int]:
-        """The root, branching nodes (>= 2 children) and leaves, in node order."""
-        return [node for node, kids in enumerate(self.children()) if node == 0 or len(kids) != 1]
+    def indicator_nodes(self) -> set[int]:
+        """The root, branching nodes (>= 2 children) and leaves."""
+        return {node for node, kids in enumerate(self.children()) if node == 0 or len(kids) != 1}
 
 
 def sweep_and_prune(points: np.ndarray, separation: np.ndarray) -> np.ndarray:
