@@ -52,7 +52,8 @@ def full_isomap_seconds(graph: VoxelGraph) -> float:
     squared -= squared.mean(axis=1, keepdims=True)
     gram = -0.5 * squared
     values, vectors = np.linalg.eigh(gram)
-    (vectors[:, -3:] * np.sqrt(np.maximum(values[-3:], 0))).reshape(n, 3)
+    embedding = vectors[:, -3:] * np.sqrt(np.maximum(values[-3:], 0))
+    assert embedding.shape == (n, 3)
     return time.perf_counter() - start
 
 

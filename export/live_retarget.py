@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from export.humanoid import HumanoidRig
-from export.motion import continuous_quaternions
 from export.retarget import leg_length, local_rotations, rest_frames, root_positions
+from samba.kinematics import continuous_quaternions
 from samba.skeleton import N_JOINTS
 
 

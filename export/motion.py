@@ -15,7 +15,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from export.humanoid import N_BONES, PARENTS, TIP_BONES, HumanoidRig
-from samba.kinematics import resample_times, sample_linear, sample_rotations
+from samba.kinematics import (
+    continuous_quaternions,
+    resample_times,
+    sample_linear,
+    sample_rotations,
+)
 
 
 @dataclass(frozen=True)
@@ -95,15 +100,3 @@ class HumanoidMotion:
         world = self.world_matrices()[:, list(TIP_BONES)]
         joints = self.world_positions()[:, list(TIP_BONES)]
         return joints + np.einsum("nbij,bj->nbi", world, self.rig.tips)
-
-
-def continuous_quaternions(quaternions: np.ndarray) -> np.ndarray:
-    """Quaternions (n, ..., 4) with signs flipped so that each frame's quaternion has a
-    non-negative dot product with the previous frame's (same rotations, no sign jumps)."""
-    q = np.array(quaternions, dtype=np.float64)
-    if len(q) < 2:
-        return q
-    dots = np.sum(q[1:] * q[:-1], axis=-1)
-    flips = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
-    q[1:] *= flips[..., None]
-    return q

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from samba.errors import InputError
+from samba.kinematics import unit_vectors
 from samba.skeleton import N_JOINTS, Body
 
 PART_NAMES: tuple[str, ...] = ("torso", "head", "l_arm", "r_arm", "l_leg", "r_leg")
@@ -155,12 +156,6 @@ def scaled_to(poses: np.ndarray, height: float) -> np.ndarray:
     pivot = poses[:, [7, 8]].mean(axis=1)
     pivot[:, 1] = poses[:, [11, 12], 1].min(axis=1)
     return pivot[:, None] + factor[:, None, None] * (poses - pivot[:, None])
-
-
-def _unit(vectors: np.ndarray) -> np.ndarray:
-    """Unit vectors (..., 3) along `vectors`; zero where a vector has (almost) no length."""
-    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
-    return np.divide(vectors, length, out=np.zeros_like(vectors), where=length > 1e-9)
 
 
 def _stadium_radius(girth: float, aspect: float) -> float:
@@ -304,9 +299,9 @@ class BodyModel:
         hip_mid = j[:, [7, 8]].mean(axis=1)
         shoulder_mid = j[:, [1, 2]].mean(axis=1)
         spine = shoulder_mid - hip_mid
-        across_shoulders = _unit(j[:, 1] - j[:, 2])
-        across_hips = _unit(j[:, 7] - j[:, 8])
-        up_neck = _unit(j[:, 0] - shoulder_mid)
+        across_shoulders = unit_vectors(j[:, 1] - j[:, 2])
+        across_hips = unit_vectors(j[:, 7] - j[:, 8])
+        up_neck = unit_vectors(j[:, 0] - shoulder_mid)
         crown = HEAD_TOP_FRACTION * h - self.head_radius
         chin = min(crown, self.head_radius - CHIN_FRACTION * h)
         axes = {
@@ -326,9 +321,11 @@ class BodyModel:
             ("l", (1, 3, 5, 7, 9, 11)),
             ("r", (2, 4, 6, 8, 10, 12)),
         ):
-            hand = (HAND_FRACTION * h - self.forearm_radius) * _unit(j[:, wrist] - j[:, elbow])
-            up_shin = _unit(j[:, knee] - j[:, ankle])
-            forward = _unit(np.cross(across_hips, up_shin))
+            hand = (HAND_FRACTION * h - self.forearm_radius) * unit_vectors(
+                j[:, wrist] - j[:, elbow]
+            )
+            up_shin = unit_vectors(j[:, knee] - j[:, ankle])
+            forward = unit_vectors(np.cross(across_hips, up_shin))
             sole = j[:, ankle] - (ANKLE_HEIGHT_FRACTION * h - self.foot_radius) * up_shin
             axes[f"{side}_upper_arm"] = (j[:, shoulder], j[:, elbow])
             axes[f"{side}_forearm"] = (j[:, elbow], j[:, wrist] + hand)

@@ -22,6 +22,8 @@ SKEWNESS = 0.0
 """Skewness of the voxels' distances to the chord above which they are not linear. A
 uniformly filled straight cylinder gives about -0.57 (most volume at the surface);
 volume bulging to one side of the chord (a bend) pushes it up through 0."""
+HUMAN_END_BRANCHES = 5
+"""End branches of a human model: head, two arms, two legs."""
 MIN_VOXELS = 12
 """Fewest voxels the skewness test is applied to."""
 
@@ -47,10 +49,30 @@ class Branch:
 
     def at(self, fractions: np.ndarray) -> np.ndarray:
         """Points (k, 3) meters at `fractions` (k,) of the arc length along the branch."""
-        steps = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
-        arc = np.concatenate([[0.0], np.cumsum(steps)])
-        target = np.asarray(fractions, dtype=np.float64) * arc[-1]
-        return np.stack([np.interp(target, arc, self.points[:, a]) for a in range(3)], axis=-1)
+        return points_along(self.points, fractions)
+
+
+def arc_lengths(polylines: np.ndarray) -> np.ndarray:
+    """Arc length (..., p) from the start to each vertex of polylines (..., p, 3)."""
+    steps = np.linalg.norm(np.diff(polylines, axis=-2), axis=-1)
+    start = np.zeros((*steps.shape[:-1], 1))
+    return np.concatenate([start, np.cumsum(steps, axis=-1)], axis=-1)
+
+
+def points_along(polylines: np.ndarray, fractions: np.ndarray) -> np.ndarray:
+    """Points (..., k, 3) at `fractions` (k,) (0..1) of the arc length of each polyline
+    (..., p, 3), p >= 2; a polyline of no length gives its first vertex."""
+    polylines = np.asarray(polylines, dtype=np.float64)
+    arc = arc_lengths(polylines)
+    target = np.asarray(fractions, dtype=np.float64) * arc[..., -1:]
+    last = polylines.shape[-2] - 2
+    segment = np.minimum((arc[..., None, 1:-1] < target[..., None]).sum(axis=-1), last)
+    start = np.take_along_axis(arc, segment, axis=-1)
+    length = np.take_along_axis(arc, segment + 1, axis=-1) - start
+    t = np.clip((target - start) / np.where(length > 0, length, 1.0), 0.0, 1.0)
+    a = np.take_along_axis(polylines, segment[..., None], axis=-2)
+    b = np.take_along_axis(polylines, segment[..., None] + 1, axis=-2)
+    return a + t[..., None] * (b - a)
 
 
 @dataclass(frozen=True)
@@ -81,7 +103,7 @@ class FrameModel:
         """Five leaf branches (head, two arms, two legs) hanging off one trunk: the
         branches that carry others form a single chain from the root, or the root is the
         only branching point (a root with five branches)."""
-        if self.leaf_count != 5:
+        if self.leaf_count != HUMAN_END_BRANCHES:
             return False
         carriers = sorted({b.parent for b in self.branches if b.parent >= 0})
         starts_at_root = [i for i, b in enumerate(self.branches) if b.parent < 0]
@@ -129,8 +151,7 @@ def frame_model(
 def _segment(points: np.ndarray, voxels: list[np.ndarray], threshold: float) -> np.ndarray:
     """Fractions of arc length where the skewness test cuts a branch with curve `points`
     (p, 3) and per-point voxels."""
-    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    arc = np.concatenate([[0.0], np.cumsum(steps)])
+    arc = arc_lengths(points)
     if arc[-1] <= 0:
         return np.zeros(0)
     cuts: list[float] = []

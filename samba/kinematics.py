@@ -111,3 +111,22 @@ def _split_times(times: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     lo = np.minimum(lo, n - 1)
     frac = np.clip(times - lo, 0.0, 1.0)
     return lo, frac
+
+
+def continuous_quaternions(quaternions: np.ndarray) -> np.ndarray:
+    """Quaternions (n, ..., 4) with signs flipped so that each frame's quaternion has a
+    non-negative dot product with the previous frame's (same rotations, no sign jumps)."""
+    q = np.array(quaternions, dtype=np.float64)
+    if len(q) < 2:
+        return q
+    dots = np.sum(q[1:] * q[:-1], axis=-1)
+    flips = np.cumprod(np.where(dots < 0, -1.0, 1.0), axis=0)
+    q[1:] *= flips[..., None]
+    return q
+
+
+def unit_vectors(vectors: np.ndarray) -> np.ndarray:
+    """Unit vectors (..., 3) along `vectors` (..., 3); zero where a vector has (almost)
+    no length (below 1e-9)."""
+    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    return np.divide(vectors, length, out=np.zeros_like(vectors), where=length > 1e-9)

@@ -25,7 +25,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import gaussian_kde
 
 from samba.errors import InputError
-from samba.frame_kinematics import Branch, FrameModel
+from samba.frame_kinematics import Branch, FrameModel, points_along
 
 RESAMPLE = np.linspace(0.0, 1.0, 6)
 """Fractions of arc length at which two branches are compared."""
@@ -126,18 +126,13 @@ def _match(last: list[np.ndarray], branches: tuple[Branch, ...]) -> np.ndarray:
     out = np.full(len(last), -1, dtype=np.int64)
     if not branches:
         return out
-    model = np.stack([_resampled(points) for points in last])
+    model = np.stack([points_along(points, RESAMPLE) for points in last])
     frame = np.stack([b.at(RESAMPLE) for b in branches])
     cost = np.sqrt(((model[:, None] - frame[None]) ** 2).sum(-1).mean(-1))
     rows, cols = linear_sum_assignment(cost)
     good = cost[rows, cols] <= MATCH_GATE
     out[rows[good]] = cols[good]
     return out
-
-
-def _resampled(points: np.ndarray) -> np.ndarray:
-    """A curve's points (p, 3) at `RESAMPLE` fractions of its arc length."""
-    return Branch(parent=-1, points=points, joints=np.zeros(0)).at(RESAMPLE)
 
 
 def _joint_peaks(matched: list[Branch]) -> np.ndarray:

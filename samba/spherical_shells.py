@@ -164,10 +164,9 @@ def _link(
     inward = cluster_shell[b] == cluster_shell[a] - 1
     pairs, hits = np.unique(np.stack([a[inward], b[inward]], axis=1), axis=0, return_counts=True)
     parent = np.full(count, -1, dtype=np.int64)
-    best = np.zeros(count)
-    for (outer, inner), hit in zip(pairs, hits, strict=True):
-        if hit > best[outer]:
-            best[outer], parent[outer] = hit, inner
+    order = np.lexsort((-hits, pairs[:, 0])) if len(pairs) else np.zeros(0, dtype=np.int64)
+    first = order[np.r_[True, pairs[order[1:], 0] != pairs[order[:-1], 0]]] if len(order) else order
+    parent[pairs[first, 0]] = pairs[first, 1]
     means = np.zeros((count, 3))
     np.add.at(means, cluster, y)
     means /= np.bincount(cluster, minlength=count)[:, None]

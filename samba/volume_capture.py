@@ -24,6 +24,7 @@ from scipy.spatial.transform import Rotation
 from samba.errors import InputError
 from samba.frame_kinematics import SKEWNESS, FrameModel, frame_model
 from samba.isomap import LANDMARKS, VoxelGraph, isomap
+from samba.kinematics import continuous_quaternions, forward_kinematics, unit_vectors
 from samba.sequence_model import SequenceFit, fit_sequence
 from samba.spherical_shells import ShellSettings, skeleton_curve
 from samba.voxel_grid import VoxelGrid
@@ -69,7 +70,7 @@ def frame_models(
     models, embed, total = [], [], []
     for t, volume in enumerate(volumes):
         start = time.perf_counter()
-        indices = np.argwhere(volume)
+        indices = grid.indices(volume)
         graph = VoxelGraph.from_indices(indices, settings.epsilon)
         keep = graph.largest()
         if len(keep) < MIN_VOXELS:
@@ -77,7 +78,7 @@ def frame_models(
         part = graph.subgraph(keep)
         embedding = isomap(part, settings.landmarks)
         embedded = time.perf_counter()
-        positions = grid.origin + indices[keep] * grid.voxel
+        positions = grid.points_at(indices[keep])
         curve = skeleton_curve(embedding, part, positions, settings.shells)
         models.append(frame_model(curve, positions, settings.skewness))
         embed.append(embedded - start)
@@ -115,20 +116,16 @@ class KinematicMotion:
     def forward(self) -> np.ndarray:
         """Joint positions (n, J + leaves, 3) meters of the model's fixed link lengths
         posed by `rotations` from `root` (the BVH file's forward kinematics)."""
-        n, count = len(self.root), len(self.names)
-        world = Rotation.from_quat(self.rotations.reshape(-1, 4)).as_matrix()
-        world = world.reshape(n, count, 3, 3)
-        out = np.zeros((n, count, 3))
-        frames = np.zeros((n, count, 3, 3))
-        for j, parent in enumerate(self.parents):
-            if parent < 0:
-                frames[:, j] = world[:, j]
-                out[:, j] = self.root
-                continue
-            frames[:, j] = frames[:, parent] @ world[:, j]
-            out[:, j] = out[:, parent] + frames[:, parent] @ self.offsets[j]
-        ends = [out[:, j] + frames[:, j, :, 2] * self.lengths[j] for j in self.leaves]
-        return np.concatenate([out, np.stack(ends, axis=1)], axis=1)
+        n, leaves = len(self.root), self.leaves
+        parents = np.array([*self.parents, *leaves])
+        identity = np.broadcast_to([0.0, 0.0, 0.0, 1.0], (n, len(leaves), 4))
+        rotations = np.concatenate([self.rotations, identity], axis=1)
+        ends = np.zeros((len(leaves), 3))
+        ends[:, 2] = self.lengths[leaves]
+        translations = np.broadcast_to(np.concatenate([self.offsets, ends]), (n, len(parents), 3))
+        translations = translations.copy()
+        translations[:, 0] = self.root
+        return forward_kinematics(parents, rotations, translations)
 
     def lowpassed(self, cutoff: float) -> KinematicMotion:
         """The motion with joint angles and root low-pass filtered: a zero-phase
@@ -139,10 +136,7 @@ class KinematicMotion:
         if len(self.root) < 10:
             return self
         b, a = butter(2, cutoff / (self.fps / 2))
-        q = self.rotations.copy()
-        flip = np.cumsum(np.sum(q[1:] * q[:-1], axis=-1) < 0, axis=0) % 2 == 1
-        q[1:][flip] *= -1
-        q = filtfilt(b, a, q, axis=0)
+        q = filtfilt(b, a, continuous_quaternions(self.rotations), axis=0)
         q /= np.linalg.norm(q, axis=-1, keepdims=True)
         return KinematicMotion(
             self.names,
@@ -178,12 +172,12 @@ def pose_model(fit: SequenceFit, fps: float) -> KinematicMotion:
     frames = np.zeros((n, count, 3, 3))
     frames[:, 0] = np.eye(3)
     for j in range(1, count):
-        z = _unit(ends[j] - starts[j])
+        z = unit_vectors(ends[j] - starts[j])
         parent_x = frames[:, parents[j], :, 0]
         y = np.cross(z, parent_x)
         weak = np.linalg.norm(y, axis=-1) < 1e-6
         y[weak] = frames[weak, parents[j], :, 1]
-        y = _unit(y)
+        y = unit_vectors(y)
         frames[:, j] = np.stack([np.cross(y, z), y, z], axis=-1)
     local = np.zeros_like(frames)
     local[:, 0] = np.eye(3)
@@ -207,12 +201,6 @@ def pose_model(fit: SequenceFit, fps: float) -> KinematicMotion:
         positions=positions,
         fps=fps,
     )
-
-
-def _unit(vectors: np.ndarray) -> np.ndarray:
-    """Vectors (..., 3) scaled to length 1 (zero vectors stay zero)."""
-    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
-    return vectors / np.where(norm > 0, norm, 1.0)
 
 
 @dataclass(frozen=True)

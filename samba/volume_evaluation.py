@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from samba.articulated_figure import ArticulatedFigure, creature_motion
 from samba.body_model import CAPSULE_NAMES, CAPSULE_PARTS, PART_NAMES, BodyModel, scaled_to
+from samba.frame_kinematics import HUMAN_END_BRANCHES
 from samba.observation import mean_facing
 from samba.segments import segment_distances
 from samba.synthetic import generate
@@ -93,7 +94,7 @@ def human_take(
     grid = VoxelGrid.from_bounds(low, high, voxel)
     volumes = human_volumes(poses, volume_cameras(grid, 4), body, grid, noise, seed)
     capture = capture_volumes(volumes, grid, fps, settings)
-    if capture.fit.model.branch_count == 5:
+    if capture.fit.model.branch_count == HUMAN_END_BRANCHES:
         joints = humanoid_joints(capture.fit, mean_facing(poses[:1]))
         errors = np.linalg.norm(joints - poses, axis=-1) * 100.0
     else:

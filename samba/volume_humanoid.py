@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from samba.errors import InputError
+from samba.frame_kinematics import HUMAN_END_BRANCHES, arc_lengths, points_along
 from samba.sequence_model import SequenceFit
 from samba.skeleton import N_JOINTS
 
@@ -49,11 +50,11 @@ def humanoid_joints(fit: SequenceFit, facing: np.ndarray) -> np.ndarray:
     """
     model = fit.model
     leaves = [b for b in range(len(model.parents)) if b not in model.parents]
-    if len(leaves) != 5:
+    if len(leaves) != HUMAN_END_BRANCHES:
         raise InputError(
             "volume sequence",
-            f"the derived model has {len(leaves)} end branches, not a human's 5 "
-            "(head, two arms, two legs)",
+            f"the derived model has {len(leaves)} end branches, not a human's "
+            f"{HUMAN_END_BRANCHES} (head, two arms, two legs)",
         )
     forward = np.asarray(facing, dtype=np.float64) * np.array([1.0, 0.0, 1.0])
     if not np.linalg.norm(forward) > 0:
@@ -91,18 +92,11 @@ def _limb(fit: SequenceFit, branch: int) -> np.ndarray:
 
 def _model_joint_fractions(fit: SequenceFit, branch: int, polyline: np.ndarray) -> np.ndarray:
     """Fractions of the limb polyline's length at its interior model joints (frame mean)."""
-    steps = np.linalg.norm(np.diff(polyline, axis=1), axis=-1)
-    arc = np.cumsum(steps, axis=1) / np.maximum(steps.sum(axis=1, keepdims=True), 1e-12)
-    return arc[:, : len(fit.model.joints[branch])].mean(axis=0)
+    arc = arc_lengths(polyline)
+    fractions = arc[:, 1:] / np.maximum(arc[:, -1:], 1e-12)
+    return fractions[:, : len(fit.model.joints[branch])].mean(axis=0)
 
 
 def _at(polyline: np.ndarray, fraction: float) -> np.ndarray:
     """(n, 3) points at `fraction` of each frame's polyline (n, k, 3) length."""
-    steps = np.linalg.norm(np.diff(polyline, axis=1), axis=-1)
-    arc = np.concatenate([np.zeros((len(steps), 1)), np.cumsum(steps, axis=1)], axis=1)
-    target = fraction * arc[:, -1]
-    segment = np.clip((arc[:, 1:-1] < target[:, None]).sum(axis=1), 0, steps.shape[1] - 1)
-    frame = np.arange(len(polyline))
-    t = (target - arc[frame, segment]) / np.maximum(steps[frame, segment], 1e-12)
-    start = polyline[frame, segment]
-    return start + np.clip(t, 0.0, 1.0)[:, None] * (polyline[frame, segment + 1] - start)
+    return points_along(polyline, np.array([fraction]))[:, 0]

@@ -89,7 +89,7 @@ class VoxelGrid:
 
     def centers(self) -> np.ndarray:
         """Centres (nx * ny * nz, 3) m of all voxels, in C order of (ix, iy, iz)."""
-        return self._to_world(np.indices(self.shape).reshape(3, -1).T)
+        return self.points_at(np.indices(self.shape).reshape(3, -1).T)
 
     def indices(self, occupancy: np.ndarray) -> np.ndarray:
         """Indices (m, 3) int64 (ix, iy, iz) of the occupied voxels of `occupancy`, C order.
@@ -100,7 +100,7 @@ class VoxelGrid:
 
     def points(self, occupancy: np.ndarray) -> np.ndarray:
         """Centres (m, 3) m of the occupied voxels of `occupancy` (nx, ny, nz) bool, C order."""
-        return self._to_world(self.indices(occupancy))
+        return self.points_at(self.indices(occupancy))
 
     def occupancy_of(self, points: np.ndarray) -> np.ndarray:
         """The (nx, ny, nz) bool grid of the voxels holding any of `points` (..., 3) m.
@@ -118,8 +118,8 @@ class VoxelGrid:
         occupancy[tuple(index[inside].astype(np.int64).T)] = True
         return occupancy
 
-    def _to_world(self, index: np.ndarray) -> np.ndarray:
-        """Centres (m, 3) m of voxels with indices (m, 3)."""
+    def points_at(self, index: np.ndarray) -> np.ndarray:
+        """Centres (m, 3) m of the voxels at grid indices `index` (m, 3)."""
         return self.origin + self.voxel * index
 
     def _checked(self, occupancy: np.ndarray) -> np.ndarray:

@@ -27,6 +27,7 @@ from samba.calibration_file import read_calibration
 from samba.camera import CameraGroup
 from samba.cli_arguments import finite_float, natural, positive, positive_float
 from samba.errors import InputError
+from samba.frame_kinematics import HUMAN_END_BRANCHES
 from samba.frame_source import open_frames
 from samba.silhouette_extraction import BACKGROUND_METHODS, SilhouetteExtractor
 from samba.skeleton import JOINT_NAMES
@@ -38,8 +39,6 @@ from service.track_video_cli import sized_frames
 
 DEFAULT_BOUNDS = (-1.0, 0.0, -1.0, 1.0, 2.1, 1.0)
 """Capture volume (x0, y0, z0, x1, y1, z1) m: 2 x 2 m of floor, 2.1 m high."""
-HUMAN_END_BRANCHES = 5
-"""End branches of a model `humanoid_joints` takes: head, two arms, two legs."""
 
 Frames = Iterator[tuple[int, np.ndarray]]
 """One camera's (frame number, BGR uint8 image (H, W, 3)) in order."""
@@ -138,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
         for video, camera in zip(args.videos, cameras, strict=True)
     ]
     extractors = _extractors(args, streams, cameras)
-    first, volumes = _carve(streams, extractors, VisualHull(grid, cameras), args.min_views)
+    first, volumes, counts = _carve(streams, extractors, VisualHull(grid, cameras), args.min_views)
     if not volumes:
         raise InputError(
             ", ".join(args.videos),
@@ -159,18 +158,17 @@ def run(args: argparse.Namespace) -> int:
         )
     elif joints_out is not None:
         note = f", 13 joints -> {joints_out}"
-    print(_summary(capture, volumes, first, out) + note)
+    print(_summary(capture, counts, first, out) + note)
     return 0
 
 
-def _summary(capture: VolumeCapture, volumes: list[np.ndarray], first: int, out: Path) -> str:
-    """The line telling what was captured from `volumes` (nx, ny, nz) bool, the first
-    from video frame `first`, and written to `out`."""
+def _summary(capture: VolumeCapture, counts: list[int], first: int, out: Path) -> str:
+    """The line telling what was captured from volumes of `counts` voxels each, the
+    first from video frame `first`, and written to `out`."""
     model, times = capture.fit.model, capture.times
-    voxels = np.median([volume.sum() for volume in volumes])
     return (
-        f"capture-volume: {len(volumes)} frames (video frames {first}.."
-        f"{first + len(volumes) - 1}), {voxels:,.0f} voxels per frame (median), model of "
+        f"capture-volume: {len(counts)} frames (video frames {first}.."
+        f"{first + len(counts) - 1}), {np.median(counts):,.0f} voxels per frame (median), model of "
         f"{model.branch_count} branches, {model.link_count} links {model.signature}, "
         f"humanoid in {capture.humanoid_rate:.0%} of frames, {np.median(times.total):.2f} s "
         f"per frame (median; Isomap {times.isomap.sum() / times.total.sum():.0%}) -> {out}"
@@ -233,10 +231,11 @@ def _carve(
     extractors: list[SilhouetteExtractor],
     hull: VisualHull,
     min_views: int | None,
-) -> tuple[int, list[np.ndarray]]:
+) -> tuple[int, list[np.ndarray], list[int]]:
     """The volumes (nx, ny, nz) bool of the frames read in lockstep from `streams` until
     the shortest ends, from the first to the last with at least `MIN_VOXELS` voxels
-    (somebody in the volume), and the frame number of the first of them."""
+    (somebody in the volume), the frame number of the first of them, and each
+    volume's voxel count."""
     first, volumes, counts = 0, [], []
     for frames in zip(*streams, strict=False):
         silhouettes = [
@@ -254,7 +253,7 @@ def _carve(
     while counts and counts[-1] < MIN_VOXELS:  # the subject has left
         counts.pop()
         volumes.pop()
-    return first, volumes
+    return first, volumes, counts
 
 
 def _write(
