@@ -127,8 +127,10 @@ def isomap(graph: VoxelGraph, landmarks: int = LANDMARKS, dims: int = 3) -> Embe
     """Landmark Isomap of a connected `graph` into `dims` dimensions.
 
     Landmarks are picked by farthest-point sampling in geodesic distance, starting from
-    the voxel farthest from the first one (deterministic). Raises `InputError` when the
-    graph is not connected or too small for `dims` + 1 landmarks.
+    the voxel farthest from the first one (deterministic). The edge matrix holds both
+    directions of every edge, so the searches treat it as directed (scipy's undirected
+    mode would symmetrise it again on every search, at twice the cost). Raises
+    `InputError` when the graph is not connected or too small for `dims` + 1 landmarks.
     """
     edges = graph.edges
     m = edges.shape[0]
@@ -139,11 +141,11 @@ def isomap(graph: VoxelGraph, landmarks: int = LANDMARKS, dims: int = 3) -> Embe
     count = min(landmarks, m)
     chosen = np.empty(count, dtype=np.int64)
     geodesic = np.empty((count, m))
-    start = int(np.argmax(dijkstra(edges, indices=0, directed=False)))
+    start = int(np.argmax(dijkstra(edges, indices=0)))
     nearest = np.full(m, np.inf)
     chosen[0] = start
     for k in range(count):
-        geodesic[k] = dijkstra(edges, indices=int(chosen[k]), directed=False)
+        geodesic[k] = dijkstra(edges, indices=int(chosen[k]))
         nearest = np.minimum(nearest, geodesic[k])
         if k + 1 < count:
             chosen[k + 1] = int(np.argmax(nearest))

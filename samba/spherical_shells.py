@@ -28,7 +28,13 @@ from samba.isomap import Embedding, VoxelGraph
 class ShellSettings:
     """Parameters of nonlinear spherical shells.
 
-    `shells`: concentric partitions (the paper's 25). `separation`: sweep-and-prune gap
+    `shell_width`: the thickness of the concentric shells, in voxels of the embedding
+    (the paper fixed their number, 25; a thickness keeps the noise test below at one
+    depth in voxels whatever the volume's size: at 1.4 voxels a human of 30 mm voxels
+    gets about 25 shells, and its head, which reaches little beyond the shoulders from
+    the volume's mean, stays deep enough to survive; on jumping jacks and waving,
+    tuning seeds 1-3, the worst take's frames with human topology went from 57% with
+    25 shells to 87%). `separation`: sweep-and-prune gap
     per axis, in voxels of the embedding, that separates two clusters of a shell.
     `shepard_neighbours` and `shepard_power`: the embedded points nearest a curve point
     that interpolate its Euclidean position, weighted by 1 / distance ** power.
@@ -37,7 +43,7 @@ class ShellSettings:
     radius encloses the mean and merges into the root.
     """
 
-    shells: int = 25
+    shell_width: float = 1.4
     separation: tuple[float, float, float] = (2.0, 2.0, 2.0)
     shepard_neighbours: int = 8
     shepard_power: float = 2.0
@@ -111,16 +117,17 @@ def skeleton_curve(
     `positions` (m, 3) meters.
     """
     settings = settings or ShellSettings()
-    if settings.shells < 2:
-        raise InputError("shells", f"need at least 2 shells, got {settings.shells}")
+    if not settings.shell_width > 0:
+        raise InputError("shell_width", f"must be > 0 voxels, got {settings.shell_width}")
     y = embedding.points
     radius = np.linalg.norm(y, axis=1)
-    width = radius.max() / settings.shells
-    shell = np.minimum((radius / width).astype(np.int64), settings.shells - 1)
+    shells = max(2, int(np.ceil(radius.max() / settings.shell_width)))
+    width = radius.max() / shells
+    shell = np.minimum((radius / width).astype(np.int64), shells - 1)
     cluster = np.empty(len(y), dtype=np.int64)
     cluster_shell = []
     separation = np.asarray(settings.separation, dtype=np.float64)
-    for s in range(settings.shells):
+    for s in range(shells):
         inside = np.flatnonzero(shell == s)
         labels = sweep_and_prune(y[inside], separation)
         cluster[inside] = labels + len(cluster_shell)
