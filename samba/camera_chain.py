@@ -21,13 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
-from samba.camera import Camera
+from samba.camera import Camera, CameraGroup
+from samba.cross_view_labels import CrossViewLabeller, CrossViewSettings
 from samba.frame_io import read_frames, write_video
 from samba.lead_in import LeadIn, standing_lead_in
 from samba.marker_detection import detect_markers, static_mask
 from samba.marker_render import RenderOptions, film_empty_stage, render
 from samba.marker_tracking import REFERENCE_FOCAL_PX, MarkerTracker, TrackerSettings
-from samba.skeleton import N_MARKERS, markers_of
+from samba.skeleton import N_MARKERS, markers_of, standing_pose
 from samba.triangulation import triangulate
 
 EMPTY_STAGE_FRAMES = 10
@@ -41,13 +42,15 @@ scaled per camera), nearer another marker and within twice this of it is a swap.
 class ChainSettings:
     """How `run_chain` films and measures: the rig's `render` options, tracker settings
     `tracker` in reference pixels (scaled per camera by `TrackerSettings.for_camera`),
-    and the standing lead-in: `hold_seconds` in the standard pose, then `blend_seconds`
-    moving into the take's first pose."""
+    the standing lead-in: `hold_seconds` in the standard pose, then `blend_seconds`
+    moving into the take's first pose; and the cross-view labelling of lost labels
+    (`cross_view`; None: each camera's tracker alone)."""
 
     render: RenderOptions = field(default_factory=RenderOptions)
     tracker: dict[str, float] = field(default_factory=dict)
     hold_seconds: float = 0.5
     blend_seconds: float = 0.5
+    cross_view: CrossViewSettings | None = field(default_factory=CrossViewSettings)
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,19 +131,39 @@ def detect_camera(
     ]
 
 
-def track_camera(
-    camera: Camera, centroids: Sequence[np.ndarray], lead_in: LeadIn, settings: ChainSettings
+def track_cameras(
+    cameras: CameraGroup,
+    centroids: Sequence[Sequence[np.ndarray]],
+    lead_in: LeadIn,
+    settings: ChainSettings,
 ) -> np.ndarray:
-    """One camera's labelled pixels (F, 8, 2) from its blob centroids per frame, the
-    tracker started from the standard pose where the lead-in stands."""
-    tracker = MarkerTracker.from_standard_pose(
-        camera,
-        lead_in.position,
-        lead_in.heading_deg,
-        lead_in.height,
-        TrackerSettings.for_camera(camera, **settings.tracker),
+    """Every camera's labelled pixels (c, F, 8, 2) from its blob centroids per frame
+    (`centroids[camera][frame]`, (m, 2) each). Each tracker starts from the standard
+    pose where the lead-in stands; with `settings.cross_view`, lost labels are found
+    again across the cameras every frame (`CrossViewLabeller`) and handed back to the
+    trackers."""
+    where = (lead_in.position, lead_in.heading_deg, lead_in.height)
+    trackers = [
+        MarkerTracker.from_standard_pose(
+            camera, *where, TrackerSettings.for_camera(camera, **settings.tracker)
+        )
+        for camera in cameras
+    ]
+    labeller = (
+        CrossViewLabeller(cameras, markers_of(standing_pose(*where)), settings.cross_view)
+        if settings.cross_view is not None
+        else None
     )
-    return tracker.track(centroids)
+    frames = len(centroids[0])
+    out = np.full((len(cameras), frames, N_MARKERS, 2), np.nan)
+    for f in range(frames):
+        labelled = np.stack([t.step(c[f]) for t, c in zip(trackers, centroids, strict=True)])
+        if labeller is not None:
+            labelled, found = labeller.step(labelled, [t.anonymous_blobs for t in trackers])
+            for event in found:
+                trackers[event.camera].reacquire(event.label, event.pixel)
+        out[:, f] = labelled
+    return out
 
 
 def run_chain(
@@ -160,16 +183,15 @@ def run_chain(
     settings = settings or ChainSettings()
     lead_in = standing_lead_in(poses, fps, settings.hold_seconds, settings.blend_seconds)
     views = render(lead_in.poses, cameras, settings.render, seed)
-    pixels = []
+    centroids = []
     for view in views:
         frames = view.frames
         if video_folder is not None:
             path = Path(video_folder) / f"{view.camera.name}.avi"
             write_video(frames, path, fps)
             frames = read_frames(path)
-        centroids = detect_camera(view.camera, frames, settings, seed)
-        pixels.append(track_camera(view.camera, centroids, lead_in, settings))
-    tracked = np.stack(pixels)
+        centroids.append(detect_camera(view.camera, frames, settings, seed))
+    tracked = track_cameras(CameraGroup(tuple(cameras)), centroids, lead_in, settings)
     take = slice(lead_in.frames, None)
     return ChainResult(
         truth=markers_of(lead_in.poses[take]),

@@ -45,12 +45,11 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.spatial.transform import Rotation
 
 from samba.camera import Camera
 from samba.errors import InputError
 from samba.segments import segment_distances
-from samba.skeleton import MARKER_NAMES, N_MARKERS, Body, markers_of
+from samba.skeleton import MARKER_NAMES, N_MARKERS, markers_of, standing_pose
 
 REFERENCE_FOCAL_PX = 80.0 / np.tan(np.radians(30.0))
 """Focal length (px) of a 160-pixel-wide image with a 60-degree lens: the settings' scale."""
@@ -169,10 +168,7 @@ class MarkerTracker:
         facing +Z turned by `heading_deg` about +Y (towards +X). Markers outside the image
         start abandoned. `settings` default to `TrackerSettings.for_camera(camera)`.
         """
-        pose = Body.from_height(height).standard_pose()
-        turn = Rotation.from_euler("y", heading_deg, degrees=True)
-        pose = turn.apply(pose) + np.array([position[0], 0.0, position[1]])
-        pixels = camera.project(markers_of(pose))
+        pixels = camera.project(markers_of(standing_pose(position, heading_deg, height)))
         pixels[~camera.in_image(pixels)] = np.nan
         return cls(pixels, settings or TrackerSettings.for_camera(camera))
 

@@ -13,10 +13,12 @@ Conventions (see ARCHITECTURE.md):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from enum import IntEnum
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 JOINT_NAMES: tuple[str, ...] = (
     "head",
@@ -155,6 +157,17 @@ class Body:
 def standard_pose(height: float = 1.70, arm_angle_deg: float = 45.0) -> np.ndarray:
     """The standard A-pose of an average body of `height` meters, shape (13, 3), meters."""
     return Body.from_height(height).standard_pose(arm_angle_deg)
+
+
+def standing_pose(
+    position: Sequence[float] = (0.0, 0.0), heading_deg: float = 0.0, height: float = 1.70
+) -> np.ndarray:
+    """The standard pose (13, 3) meters of an average body of `height` m standing on the
+    floor with its hip midpoint at `position` (x, z) meters, facing +Z turned by
+    `heading_deg` about +Y (towards +X): where the subject stands when capture starts."""
+    pose = Body.from_height(height).standard_pose()
+    turn = Rotation.from_euler("y", heading_deg, degrees=True)
+    return turn.apply(pose) + np.array([position[0], 0.0, position[1]])
 
 
 def bone_lengths(poses: np.ndarray) -> np.ndarray:

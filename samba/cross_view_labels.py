@@ -1,0 +1,329 @@
+"""Labelling lost markers again across cameras: epipolar geometry plus a 3D prediction.
+
+A camera's tracker (`samba.marker_tracking`) drops a label rather than guess when two
+markers cross or merge in its image, and in one image it cannot tell which of the blobs
+that come apart again is which: the label stays lost while its marker is in plain view.
+Several calibrated cameras can tell. `CrossViewLabeller.step` takes every camera's
+labelled pixels and the blobs its tracker left unlabelled, and gives a lost label a blob
+when one explanation fits and no other comes near:
+
+* *hypotheses*: for a label lost in camera B but labelled in others, each unlabelled blob
+  of B with the label's other views; for a label lost everywhere, each pair of
+  unlabelled blobs of two cameras. Each is triangulated (DLT).
+* a hypothesis *fits* when every view reprojects within `epipolar_px` (so the blob lies
+  on the label's epipolar lines) and its 3D point is within the label's 3D gate of the
+  label's prediction; it *comes near* with twice the reprojection tolerance and the gate
+  plus `rival_margin_m`.
+* a fitting hypothesis stands when every hypothesis of the same label that comes near
+  puts the same blob in each of its new cameras, no hypothesis of another label that
+  comes near uses any of its blobs, and no other label lost in its new cameras projects
+  as near the blob (within `ambiguity_px`).
+
+A label is also dropped from a camera's output (not from its tracker) when its views
+disagree (`_disagreeing`: a tracker that put it on another marker's blob), or when a marker lost
+in that camera, but triangulated from the others or lost for at most `FRESH_FRAMES`,
+projects within `ambiguity_px` of its blob: the blob is probably both markers merged.
+
+The prediction of a label is its last 3D position, moved with its `FOLLOWS` neighbour on
+the body (as the tracker's searching labels are) while that neighbour is triangulated;
+its gate is `gate_m`, growing by `gate_growth_m` per frame lost up to `max_gate_m`. The
+labeller starts from the markers of the standard pose, where the subject stands when
+capture starts. Pixels are each camera's raw (distorted) pixels; tolerances are pixels
+of a 160-pixel-wide, 60-degree camera (`REFERENCE_FOCAL_PX`), scaled per camera.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+
+from samba.camera import CameraGroup
+from samba.errors import InputError
+from samba.marker_tracking import FOLLOWS, REFERENCE_FOCAL_PX
+from samba.skeleton import N_MARKERS
+from samba.triangulation import Triangulation
+
+FRESH_FRAMES = 5
+"""A marker lost for at most this many frames still has a position trusted enough to
+drop a label whose blob it may have merged with."""
+SHORTEST_SPAN: tuple[float, ...] = (0.9, 0.9, 0.15, 0.15, 0.4, 0.4, 0.9, 0.9)
+"""The shortest distance of each marker from its `FOLLOWS` neighbour, as a fraction of
+that distance in the standard pose: the shoulders' and a knee-to-foot distance hardly
+change; a wrist comes close to its shoulder, a knee closer in a deep squat."""
+RIVAL_ERROR_FACTOR = 2.0
+"""A hypothesis comes near when it reprojects within this multiple of `epipolar_px`."""
+
+
+@dataclass(frozen=True)
+class CrossViewSettings:
+    """Tolerances of `CrossViewLabeller`: `epipolar_px` reprojection error (reference
+    pixels, scaled per camera); the 3D gate `gate_m`, growing by `gate_growth_m` per
+    frame a label is lost up to `max_gate_m`; `rival_margin_m` how much farther than the
+    gate a rival hypothesis still counts."""
+
+    epipolar_px: float = 1.0
+    ambiguity_px: float = 1.0
+    gate_m: float = 0.10
+    gate_growth_m: float = 0.02
+    max_gate_m: float = 0.40
+    rival_margin_m: float = 0.10
+    reach_m: float = 1.0
+    span_slack_m: float = 0.05
+
+
+@dataclass(frozen=True)
+class Reacquisition:
+    """Label `label` (marker index) of camera `camera` (index) put on `pixel` (u, v),
+    raw pixels of the current frame."""
+
+    camera: int
+    label: int
+    pixel: tuple[float, float]
+
+
+@dataclass(frozen=True, eq=False)
+class _Hypotheses:
+    """Candidate explanations: `label` (h,), `pixels` (c, h, 2) raw, `blob` (c, h) blob
+    index per camera (-1: none), `new` (c, h) the cameras where the label is lost."""
+
+    label: np.ndarray
+    pixels: np.ndarray
+    blob: np.ndarray
+    new: np.ndarray
+
+
+class CrossViewLabeller:
+    """Finds lost marker labels again from the views of several calibrated cameras.
+
+    `cameras` the camera group; `initial` (8, 3) meters: where the markers are when
+    capture starts (the standard pose where the subject stands). Call `step` once per
+    frame, in order, after every camera's tracker stepped.
+    """
+
+    def __init__(
+        self,
+        cameras: CameraGroup,
+        initial: np.ndarray,
+        settings: CrossViewSettings | None = None,
+    ) -> None:
+        initial = np.array(initial, dtype=np.float64)
+        if initial.shape != (N_MARKERS, 3) or not np.isfinite(initial).all():
+            raise InputError("initial", f"must be finite ({N_MARKERS}, 3) meters")
+        if len(cameras) < 2:
+            raise InputError(
+                "cameras", f"need at least 2 to label across views, got {len(cameras)}"
+            )
+        self.cameras = cameras
+        self.settings = settings or CrossViewSettings()
+        focal = np.array([camera.matrix[0, 0] for camera in cameras])
+        self._tolerance = self.settings.epipolar_px * focal / REFERENCE_FOCAL_PX  # (c,)
+        self._ambiguity = self.settings.ambiguity_px * focal / REFERENCE_FOCAL_PX
+        self._last = initial
+        standing = np.linalg.norm(initial - initial[list(FOLLOWS)], axis=-1)
+        self._span = np.stack(
+            [standing * np.array(SHORTEST_SPAN), standing + self.settings.span_slack_m], axis=-1
+        )
+        self._lost = np.zeros(N_MARKERS, dtype=np.int64)
+
+    def predicted(self, current: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each label's position (8, 3) meters in this frame and its 3D gate (8,) meters,
+        given the markers triangulated now `current` (8, 3), NaN where not: a label not
+        triangulated is where it was last, moved as its `FOLLOWS` neighbour moved since."""
+        s = self.settings
+        now = current.copy()
+        for i in np.flatnonzero(np.isnan(current).any(axis=-1)):  # parents come first
+            parent = FOLLOWS[i]
+            moved = now[parent] - self._last[parent]
+            now[i] = self._last[i] + np.where(np.isnan(moved), 0.0, moved)
+        gate = np.minimum(s.gate_m + s.gate_growth_m * self._lost, s.max_gate_m)
+        return now, gate
+
+    def step(
+        self, labelled: np.ndarray, unlabelled: Sequence[np.ndarray]
+    ) -> tuple[np.ndarray, list[Reacquisition]]:
+        """Lost labels found again in this frame.
+
+        `labelled` (c, 8, 2) raw pixels of each camera's tracked labels, NaN = lost;
+        `unlabelled` per camera the (k_c, 2) raw pixels of blobs its tracker left without a
+        label. Returns the labels with the ones found filled in (c, 8, 2), and what was
+        found (to hand back to the trackers with `MarkerTracker.reacquire`).
+        """
+        c = len(self.cameras)
+        labelled = np.array(labelled, dtype=np.float64)
+        if labelled.shape != (c, N_MARKERS, 2):
+            raise InputError(
+                "labelled", f"must be ({c}, {N_MARKERS}, 2) pixels, got {labelled.shape}"
+            )
+        if len(unlabelled) != c:
+            raise InputError(
+                "unlabelled", f"must hold one blob array per camera ({c}), got {len(unlabelled)}"
+            )
+        blobs = [np.asarray(b, dtype=np.float64).reshape(-1, 2) for b in unlabelled]
+        current = self._triangulate(labelled).points
+        prediction, gate = self.predicted(current)
+        hypotheses = _hypotheses(labelled, blobs)
+        found: list[Reacquisition] = []
+        if len(hypotheses.label):
+            fits, near = self._judge(hypotheses, current, prediction, gate)
+            fits &= self._clear_of_others(hypotheses, labelled, prediction)
+            for h in np.flatnonzero(_standing(hypotheses, fits, near)):
+                label = int(hypotheses.label[h])
+                for camera in np.flatnonzero(hypotheses.new[:, h]):
+                    if np.isnan(labelled[camera, label]).any():  # pairs may repeat a view
+                        u, v = hypotheses.pixels[camera, h]
+                        labelled[camera, label] = (u, v)
+                        found.append(Reacquisition(int(camera), label, (float(u), float(v))))
+            if found:
+                current = self._triangulate(labelled).points
+        fresh = np.where((self._lost <= FRESH_FRAMES)[:, None], prediction, np.nan)
+        positions = np.where(np.isnan(current), fresh, current)
+        self._remember(current, prediction)
+        labelled[self._merged(labelled, positions) | self._disagreeing(labelled)] = np.nan
+        return labelled, found
+
+    def _triangulate(self, raw: np.ndarray) -> Triangulation:
+        """Triangulation of raw pixels (c, n, 2) with the views' errors in pixels."""
+        return Triangulation.from_views(self.cameras.projections, self.cameras.undistort(raw))
+
+    def _judge(
+        self,
+        hypotheses: _Hypotheses,
+        current: np.ndarray,
+        prediction: np.ndarray,
+        gate: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Which hypotheses (h,) fit, and which come near (both bool)."""
+        label, margin = hypotheses.label, self.settings.rival_margin_m
+        result = self._triangulate(hypotheses.pixels)
+        ratio = np.nanmax(result.view_error / self._tolerance[:, None], axis=0)  # (h,)
+        off = np.linalg.norm(result.points - prediction[label], axis=-1)
+        limit = gate[label]
+        reach = np.where(self._lost[label] > 0, self.settings.reach_m, limit)
+        span = np.linalg.norm(result.points - current[np.array(FOLLOWS)[label]], axis=-1)
+        low, high = self._span[label, 0], self._span[label, 1]
+        stale = self._lost[label] > FRESH_FRAMES
+        with np.errstate(invalid="ignore"):
+            in_body = np.where(np.isnan(span), False, (span >= low) & (span <= high))
+            near_body = np.where(
+                np.isnan(span), True, (span >= low - margin) & (span <= high + margin)
+            )
+            # two views can meet by chance (a ghost): only near a fresh prediction
+            two_views = (~np.isnan(hypotheses.pixels).any(axis=-1)).sum(axis=0) == 2
+            fits = (ratio <= 1.0) & np.where(
+                two_views,
+                ~stale & (off <= self.settings.gate_m),
+                np.where(stale, in_body, off <= limit),
+            )
+            near = (ratio <= RIVAL_ERROR_FACTOR) & np.where(
+                stale, near_body, off <= np.maximum(reach, limit + margin)
+            )
+        return fits, near
+
+    def _clear_of_others(
+        self, hypotheses: _Hypotheses, labelled: np.ndarray, positions: np.ndarray
+    ) -> np.ndarray:
+        """Which hypotheses (h,) have no other label lost in one of their new cameras
+        whose position `positions` (8, 3) projects as near the blob (within
+        `ambiguity_px` more) as their own label's: such a blob may be the other marker's,
+        or both markers merged."""
+        projected = self.cameras.project(positions)  # (c, 8, 2)
+        lost = np.isnan(labelled).any(axis=-1)  # (c, 8)
+        to_blob = np.linalg.norm(projected[:, None] - hypotheses.pixels[:, :, None], axis=-1)
+        to_blob = np.where(np.isnan(to_blob), np.inf, to_blob)  # (c, h, 8)
+        h = np.arange(len(hypotheses.label))
+        own = to_blob[:, h, hypotheses.label]  # (c, h)
+        rival = lost[:, None, :] & (to_blob < (own + self._ambiguity[:, None])[..., None])
+        rival[:, h, hypotheses.label] = False
+        return ~(rival.any(axis=-1) & hypotheses.new).any(axis=0)
+
+    def _disagreeing(self, labelled: np.ndarray) -> np.ndarray:
+        """Labels (c, 8) bool whose views do not meet in one point: a view left more than
+        `RIVAL_ERROR_FACTOR` times `epipolar_px` off after the worst views are dropped
+        (while two remain), and both views of a label seen twice that disagree so."""
+        limit = RIVAL_ERROR_FACTOR * self._tolerance[:, None]
+        result = Triangulation.from_views(
+            self.cameras.projections, self.cameras.undistort(labelled), gate_px=float(limit.max())
+        )
+        seen = ~np.isnan(labelled).any(axis=-1)
+        off = seen & (~result.views | (result.view_error > limit))
+        pair = result.views.sum(axis=0) == 2
+        return off | (seen & (pair & off.any(axis=0))[None, :])
+
+    def _merged(self, labelled: np.ndarray, positions: np.ndarray) -> np.ndarray:
+        """Labels (c, 8) bool whose blob is probably two markers merged: a marker lost in
+        that camera whose position (`positions` (8, 3), NaN where unknown) projects
+        within `ambiguity_px` of it."""
+        projected = self.cameras.project(positions)  # (c, 8, 2)
+        lost = np.isnan(labelled).any(axis=-1) & ~np.isnan(projected).any(axis=-1)  # (c, 8)
+        gap = np.linalg.norm(labelled[:, :, None] - projected[:, None], axis=-1)  # (c, L, M)
+        with np.errstate(invalid="ignore"):
+            near = (gap < self._ambiguity[:, None, None]) & lost[:, None, :]
+        return near.any(axis=-1)
+
+    def _remember(self, current: np.ndarray, prediction: np.ndarray) -> None:
+        """Keep this frame's positions (triangulated, else predicted) for the next one."""
+        seen = ~np.isnan(current).any(axis=-1)
+        self._last = np.where(seen[:, None], current, prediction)
+        self._lost = np.where(seen, 0, self._lost + 1)
+
+
+def _hypotheses(labelled: np.ndarray, blobs: list[np.ndarray]) -> _Hypotheses:
+    """Every candidate explanation of a lost label by unlabelled blobs (see the module
+    docstring): a blob in a camera where the label is lost, with the label's other views;
+    or, for a label lost in every camera, a blob in each of two cameras."""
+    c = len(blobs)
+    lost = np.isnan(labelled).any(axis=-1)  # (c, 8)
+    labels, pixels, indices, new = [], [], [], []
+    for label in range(N_MARKERS):
+        if lost[:, label].all():
+            for a, b in combinations(range(c), 2):
+                ia, ib = np.meshgrid(np.arange(len(blobs[a])), np.arange(len(blobs[b])))
+                ia, ib = ia.ravel(), ib.ravel()
+                pix = np.full((c, len(ia), 2), np.nan)
+                pix[a], pix[b] = blobs[a][ia], blobs[b][ib]
+                idx = np.full((c, len(ia)), -1)
+                idx[a], idx[b] = ia, ib
+                labels.append(np.full(len(ia), label))
+                pixels.append(pix)
+                indices.append(idx)
+                new.append(idx >= 0)
+            continue
+        for camera in np.flatnonzero(lost[:, label]):
+            k = len(blobs[camera])
+            pix = np.repeat(labelled[:, label, None], k, axis=1)
+            pix[camera] = blobs[camera]
+            idx = np.full((c, k), -1)
+            idx[camera] = np.arange(k)
+            labels.append(np.full(k, label))
+            pixels.append(pix)
+            indices.append(idx)
+            new.append(idx >= 0)
+    if not labels:
+        return _Hypotheses(
+            np.zeros(0, int), np.zeros((c, 0, 2)), np.zeros((c, 0), int), np.zeros((c, 0), bool)
+        )
+    return _Hypotheses(
+        np.concatenate(labels),
+        np.concatenate(pixels, axis=1),
+        np.concatenate(indices, axis=1),
+        np.concatenate(new, axis=1),
+    )
+
+
+def _standing(hypotheses: _Hypotheses, fits: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """Which fitting hypotheses stand (h,) bool: every near hypothesis of the same label
+    agrees on the blob of each camera it shares, and no near hypothesis of another label
+    uses one of its blobs."""
+    label, blob = hypotheses.label, hypotheses.blob  # (h,), (c, h)
+    same_label = label[:, None] == label[None, :]  # (h, h)
+    # blob[:, h] vs blob[:, g] in cameras both use: disagree / share
+    both = (blob[:, :, None] >= 0) & (blob[:, None, :] >= 0)  # (c, h, g)
+    equal = blob[:, :, None] == blob[:, None, :]
+    disagree = (both & ~equal).any(axis=0)
+    share = (both & equal).any(axis=0)
+    conflict = (same_label & disagree) | (~same_label & share)
+    conflict &= near[None, :]
+    return fits & ~conflict.any(axis=1)

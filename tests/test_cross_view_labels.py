@@ -1,0 +1,142 @@
+"""Lost marker labels found again across cameras (`samba.cross_view_labels`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from samba.camera import CameraGroup
+from samba.camera_chain import ChainSettings, run_chain
+from samba.cross_view_labels import CrossViewLabeller, Reacquisition
+from samba.errors import InputError
+from samba.observation import spread_cameras
+from samba.skeleton import markers_of, standing_pose
+from samba.synthetic import generate
+from samba.synthetic_cameras import with_size
+
+L_WRIST, R_WRIST = 2, 3
+
+
+@pytest.fixture
+def markers() -> np.ndarray:
+    """The 8 markers (8, 3) m of the standard pose at the origin."""
+    return markers_of(standing_pose())
+
+
+def _group(markers: np.ndarray, count: int) -> CameraGroup:
+    """`count` 640x480 cameras spread around a subject standing at the markers."""
+    poses = np.repeat(standing_pose()[None], 2, axis=0)
+    return CameraGroup(tuple(with_size(c, (640, 480)) for c in spread_cameras(poses, count)))
+
+
+def _unlabelled(pixels: np.ndarray, lost: dict[int, list[int]]) -> list[np.ndarray]:
+    """Per camera, the true pixels of the labels lost there (the blobs left unlabelled)."""
+    return [pixels[c, lost.get(c, [])] for c in range(len(pixels))]
+
+
+def test_a_label_lost_in_one_camera_is_found_from_the_others(markers: np.ndarray) -> None:
+    cameras = _group(markers, 2)
+    labeller = CrossViewLabeller(cameras, markers)
+    pixels = cameras.project(markers)
+    labelled = pixels.copy()
+    labelled[1, L_WRIST] = np.nan
+    out, found = labeller.step(labelled, _unlabelled(pixels, {1: [L_WRIST]}))
+    np.testing.assert_allclose(out, pixels)
+    assert found == [Reacquisition(1, L_WRIST, tuple(pixels[1, L_WRIST]))]
+
+
+def test_a_label_lost_everywhere_is_found_near_its_prediction(markers: np.ndarray) -> None:
+    cameras = _group(markers, 3)
+    labeller = CrossViewLabeller(cameras, markers)
+    moved = markers.copy()
+    moved[R_WRIST] += [0.03, 0.02, 0.0]  # 3.6 cm from where it was: inside the gate
+    pixels = cameras.project(moved)
+    labelled = pixels.copy()
+    labelled[:, R_WRIST] = np.nan
+    out, found = labeller.step(labelled, _unlabelled(pixels, {0: [R_WRIST], 1: [R_WRIST]}))
+    np.testing.assert_allclose(out[:2, R_WRIST], pixels[:2, R_WRIST])
+    assert np.isnan(out[2, R_WRIST]).all()  # its blob there was not sent
+    assert {(f.camera, f.label) for f in found} == {(0, R_WRIST), (1, R_WRIST)}
+
+
+def test_two_blobs_on_the_epipolar_line_leave_the_label_lost(markers: np.ndarray) -> None:
+    cameras = _group(markers, 2)
+    labeller = CrossViewLabeller(cameras, markers)
+    pixels = cameras.project(markers)
+    # a second blob in camera 1 where a point 5 cm farther along camera 0's ray shows
+    ray = markers[L_WRIST] - cameras[0].center
+    decoy = cameras[1].project(markers[L_WRIST] + 0.05 * ray / np.linalg.norm(ray))
+    labelled = pixels.copy()
+    labelled[1, L_WRIST] = np.nan
+    unlabelled = [np.zeros((0, 2)), np.stack([pixels[1, L_WRIST], decoy])]
+    out, found = labeller.step(labelled, unlabelled)
+    assert found == []
+    assert np.isnan(out[1, L_WRIST]).all()
+
+
+def test_a_blob_far_from_the_prediction_is_not_taken(markers: np.ndarray) -> None:
+    cameras = _group(markers, 2)
+    labeller = CrossViewLabeller(cameras, markers)
+    moved = markers.copy()
+    moved[R_WRIST] += [0.0, 0.5, 0.0]  # half a meter up in one frame: not this marker
+    pixels = cameras.project(moved)
+    labelled = pixels.copy()
+    labelled[:, R_WRIST] = np.nan
+    _, found = labeller.step(labelled, _unlabelled(pixels, {0: [R_WRIST], 1: [R_WRIST]}))
+    assert found == []
+
+
+def test_a_blob_another_lost_marker_projects_onto_is_left_alone(markers: np.ndarray) -> None:
+    cameras = _group(markers, 3)
+    labeller = CrossViewLabeller(cameras, markers)
+    hidden = markers.copy()
+    ray = hidden[L_WRIST] - cameras[1].center
+    # the right wrist right behind the left one as camera 1 sees them: one blob there,
+    # which the left wrist's epipolar lines pass through, but so does the right wrist
+    hidden[R_WRIST] = hidden[L_WRIST] + 0.1 * ray / np.linalg.norm(ray)
+    pixels = cameras.project(hidden)
+    labelled = pixels.copy()
+    labelled[1, [L_WRIST, R_WRIST]] = np.nan
+    out, found = labeller.step(labelled, _unlabelled(pixels, {1: [L_WRIST]}))
+    assert found == []
+    assert np.isnan(out[1, [L_WRIST, R_WRIST]]).all()
+
+
+def test_a_label_on_two_merged_markers_is_dropped(markers: np.ndarray) -> None:
+    cameras = _group(markers, 3)
+    labeller = CrossViewLabeller(cameras, markers)
+    merged = markers.copy()
+    ray = merged[L_WRIST] - cameras[2].center
+    # the right wrist right behind the left one, as camera 2 sees them: one blob there
+    merged[R_WRIST] = merged[L_WRIST] + 0.1 * ray / np.linalg.norm(ray)
+    pixels = cameras.project(merged)
+    labelled = pixels.copy()
+    labelled[2, R_WRIST] = np.nan  # camera 2's tracker kept the left wrist on the blob
+    out, found = labeller.step(labelled, [np.zeros((0, 2))] * 3)
+    assert found == []
+    assert np.isnan(out[2, [L_WRIST, R_WRIST]]).all()
+    np.testing.assert_allclose(out[:2], pixels[:2])
+
+
+def test_bad_input_names_the_argument(markers: np.ndarray) -> None:
+    cameras = _group(markers, 2)
+    with pytest.raises(InputError, match="initial"):
+        CrossViewLabeller(cameras, markers[:5])
+    with pytest.raises(InputError, match="cameras"):
+        CrossViewLabeller(CameraGroup((cameras[0],)), markers)
+    labeller = CrossViewLabeller(cameras, markers)
+    with pytest.raises(InputError, match="labelled"):
+        labeller.step(np.zeros((3, 8, 2)), [np.zeros((0, 2))] * 3)
+    with pytest.raises(InputError, match="unlabelled"):
+        labeller.step(np.zeros((2, 8, 2)), [np.zeros((0, 2))])
+
+
+def test_cross_view_labelling_recovers_markers_without_swaps() -> None:
+    poses = generate("kick", seconds=4, fps=30, seed=5).poses
+    cameras = [with_size(c, (320, 240)) for c in spread_cameras(poses, 3)]
+    alone = run_chain(poses, cameras, 30.0, ChainSettings(cross_view=None))
+    together = run_chain(poses, cameras, 30.0, ChainSettings())
+    assert together.swaps() == 0
+    assert together.phantoms() == 0
+    assert together.lost_rate() < alone.lost_rate()
+    assert together.rms_error() < 0.015
