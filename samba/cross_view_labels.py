@@ -86,13 +86,17 @@ class Reacquisition:
 
 @dataclass(frozen=True, eq=False)
 class _Hypotheses:
-    """Candidate explanations: `label` (h,), `pixels` (c, h, 2) raw, `blob` (c, h) blob
-    index per camera (-1: none), `new` (c, h) the cameras where the label is lost."""
+    """Candidate explanations: `label` (h,), `pixels` (c, h, 2) raw, `blob` (c, h) the
+    unlabelled blob each camera adds (-1: none, the label's own view or no view)."""
 
     label: np.ndarray
     pixels: np.ndarray
     blob: np.ndarray
-    new: np.ndarray
+
+    @property
+    def new(self) -> np.ndarray:
+        """(c, h) bool: the cameras where the hypothesis gives the lost label a blob."""
+        return self.blob >= 0
 
 
 class CrossViewLabeller:
@@ -276,7 +280,7 @@ def _hypotheses(labelled: np.ndarray, blobs: list[np.ndarray]) -> _Hypotheses:
     or, for a label lost in every camera, a blob in each of two cameras."""
     c = len(blobs)
     lost = np.isnan(labelled).any(axis=-1)  # (c, 8)
-    labels, pixels, indices, new = [], [], [], []
+    labels, pixels, indices = [], [], []
     for label in range(N_MARKERS):
         if lost[:, label].all():
             for a, b in combinations(range(c), 2):
@@ -289,7 +293,6 @@ def _hypotheses(labelled: np.ndarray, blobs: list[np.ndarray]) -> _Hypotheses:
                 labels.append(np.full(len(ia), label))
                 pixels.append(pix)
                 indices.append(idx)
-                new.append(idx >= 0)
             continue
         for camera in np.flatnonzero(lost[:, label]):
             k = len(blobs[camera])
@@ -300,16 +303,10 @@ def _hypotheses(labelled: np.ndarray, blobs: list[np.ndarray]) -> _Hypotheses:
             labels.append(np.full(k, label))
             pixels.append(pix)
             indices.append(idx)
-            new.append(idx >= 0)
     if not labels:
-        return _Hypotheses(
-            np.zeros(0, int), np.zeros((c, 0, 2)), np.zeros((c, 0), int), np.zeros((c, 0), bool)
-        )
+        return _Hypotheses(np.zeros(0, int), np.zeros((c, 0, 2)), np.zeros((c, 0), int))
     return _Hypotheses(
-        np.concatenate(labels),
-        np.concatenate(pixels, axis=1),
-        np.concatenate(indices, axis=1),
-        np.concatenate(new, axis=1),
+        np.concatenate(labels), np.concatenate(pixels, axis=1), np.concatenate(indices, axis=1)
     )
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from samba.camera import CameraGroup
+from samba.camera import Camera, CameraGroup
 from samba.camera_chain import ChainSettings, run_chain
 from samba.cross_view_labels import CrossViewLabeller, Reacquisition
 from samba.errors import InputError
@@ -27,6 +27,15 @@ def _group(markers: np.ndarray, count: int) -> CameraGroup:
     """`count` 640x480 cameras spread around a subject standing at the markers."""
     poses = np.repeat(standing_pose()[None], 2, axis=0)
     return CameraGroup(tuple(with_size(c, (640, 480)) for c in spread_cameras(poses, count)))
+
+
+def _behind(markers: np.ndarray, camera: Camera) -> np.ndarray:
+    """The markers with the right wrist 10 cm right behind the left one as `camera`
+    sees them: one blob there for both."""
+    hidden = markers.copy()
+    ray = hidden[L_WRIST] - camera.center
+    hidden[R_WRIST] = hidden[L_WRIST] + 0.1 * ray / np.linalg.norm(ray)
+    return hidden
 
 
 def _unlabelled(pixels: np.ndarray, lost: dict[int, list[int]]) -> list[np.ndarray]:
@@ -89,12 +98,8 @@ def test_a_blob_far_from_the_prediction_is_not_taken(markers: np.ndarray) -> Non
 def test_a_blob_another_lost_marker_projects_onto_is_left_alone(markers: np.ndarray) -> None:
     cameras = _group(markers, 3)
     labeller = CrossViewLabeller(cameras, markers)
-    hidden = markers.copy()
-    ray = hidden[L_WRIST] - cameras[1].center
-    # the right wrist right behind the left one as camera 1 sees them: one blob there,
-    # which the left wrist's epipolar lines pass through, but so does the right wrist
-    hidden[R_WRIST] = hidden[L_WRIST] + 0.1 * ray / np.linalg.norm(ray)
-    pixels = cameras.project(hidden)
+    # camera 1's one blob of both wrists lies on the left wrist's epipolar lines
+    pixels = cameras.project(_behind(markers, cameras[1]))
     labelled = pixels.copy()
     labelled[1, [L_WRIST, R_WRIST]] = np.nan
     out, found = labeller.step(labelled, _unlabelled(pixels, {1: [L_WRIST]}))
@@ -105,11 +110,7 @@ def test_a_blob_another_lost_marker_projects_onto_is_left_alone(markers: np.ndar
 def test_a_label_on_two_merged_markers_is_dropped(markers: np.ndarray) -> None:
     cameras = _group(markers, 3)
     labeller = CrossViewLabeller(cameras, markers)
-    merged = markers.copy()
-    ray = merged[L_WRIST] - cameras[2].center
-    # the right wrist right behind the left one, as camera 2 sees them: one blob there
-    merged[R_WRIST] = merged[L_WRIST] + 0.1 * ray / np.linalg.norm(ray)
-    pixels = cameras.project(merged)
+    pixels = cameras.project(_behind(markers, cameras[2]))
     labelled = pixels.copy()
     labelled[2, R_WRIST] = np.nan  # camera 2's tracker kept the left wrist on the blob
     out, found = labeller.step(labelled, [np.zeros((0, 2))] * 3)
