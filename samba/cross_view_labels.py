@@ -188,9 +188,12 @@ class CrossViewLabeller:
         labelled[self._merged(labelled, positions) | self._disagreeing(labelled)] = np.nan
         return labelled, found
 
-    def _triangulate(self, raw: np.ndarray) -> Triangulation:
-        """Triangulation of raw pixels (c, n, 2) with the views' errors in pixels."""
-        return Triangulation.from_views(self.cameras.projections, self.cameras.undistort(raw))
+    def _triangulate(self, raw: np.ndarray, gate_px: float | None = None) -> Triangulation:
+        """Triangulation of raw pixels (c, n, 2) with the views' errors in pixels; views
+        off by more than `gate_px` dropped, worst first (`Triangulation.from_views`)."""
+        return Triangulation.from_views(
+            self.cameras.projections, self.cameras.undistort(raw), gate_px=gate_px
+        )
 
     def _judge(
         self,
@@ -248,9 +251,7 @@ class CrossViewLabeller:
         `RIVAL_ERROR_FACTOR` times `epipolar_px` off after the worst views are dropped
         (while two remain), and both views of a label seen twice that disagree so."""
         limit = RIVAL_ERROR_FACTOR * self._tolerance[:, None]
-        result = Triangulation.from_views(
-            self.cameras.projections, self.cameras.undistort(labelled), gate_px=float(limit.max())
-        )
+        result = self._triangulate(labelled, gate_px=float(limit.max()))
         seen = ~np.isnan(labelled).any(axis=-1)
         off = seen & (~result.views | (result.view_error > limit))
         pair = result.views.sum(axis=0) == 2
