@@ -1,10 +1,13 @@
 """Live service latency and throughput: 1, 4 and 8 sessions x 2 cameras x 60 fps, loopback.
 
 Run from the project root:  python bench/bench_service.py [--seconds 10] [--sessions 1 4 8]
-                                                         [--workers 0 2] [--method samba]
+                              [--workers 0 2] [--method samba] [--labels server nodes]
 
-For each session count and each number of worker processes (`samba serve --workers`; 0 =
-frames computed in the server's event loop), `samba serve --config` runs as its own
+For each session count, each number of worker processes (`samba serve --workers`; 0 =
+frames computed in the server's event loop) and each labelling (`labels`: "server", the
+server finds lost labels itself, or "nodes", the nodes' labels as sent; "auto", the
+default of `samba serve`, is "nodes" for these two cameras), `samba serve
+--config` runs as its own
 process with that many sessions (same calibration and pose database, each with its own
 VMC receiver). This process plays a synthetic walk (projected markers, 0.3 px noise) to
 every session's two cameras on a 60 fps wall-clock grid, all sessions' packets of a frame
@@ -49,6 +52,7 @@ from samba.calibration_file import write_calibration  # noqa: E402
 from samba.methods import method  # noqa: E402
 from samba.triangulation import Triangulation  # noqa: E402
 from service.packet import encode  # noqa: E402
+from service.session_config import LABELLERS  # noqa: E402
 from service.synthetic_capture import SyntheticCapture  # noqa: E402
 from service.udp_input import UdpInput  # noqa: E402
 
@@ -109,6 +113,7 @@ async def play(capture: SyntheticCapture, address: tuple[str, int], sessions: in
 def run(
     sessions: int,
     workers: int,
+    labels: str,
     capture: SyntheticCapture,
     calibration: Path,
     store: Path,
@@ -116,12 +121,13 @@ def run(
     tmp: Path,
 ) -> list[object]:
     """One row of the table: `sessions` sessions served by a `samba serve` process with
-    `workers` worker processes."""
+    `workers` worker processes, labelling by `labels`."""
     receivers = VmcTimes(sessions)
     config = tmp / f"serve{sessions}.toml"
     tables = [
         f'[[session]]\nname = "s{i}"\ncalibration = "{calibration}"\ndatabase = "{store}"\n'
         f'method = "{name}"\nfps = {FPS}\nvmc = ["127.0.0.1:{r.address[1]}"]\n'
+        f'labels = "{labels}"\n'
         for i, r in enumerate(receivers.inputs)
     ]
     config.write_text("\n".join(tables))
@@ -174,7 +180,9 @@ def run(
     ]
 
 
-def bench(seconds: float, sessions: list[int], workers: list[int], name: str) -> list[list[object]]:
+def bench(
+    seconds: float, sessions: list[int], workers: list[int], name: str, labels: list[str]
+) -> list[list[object]]:
     """Build the database, film the capture, measure every session count, print the
     tables; returns the rows of the latency table."""
     with tempfile.TemporaryDirectory() as folder:
@@ -187,7 +195,10 @@ def bench(seconds: float, sessions: list[int], workers: list[int], name: str) ->
         with threadpool_limits(1):
             baseline = step_ms(capture, store, name)
         rows = [
-            run(n, w, capture, calibration, store, name, tmp) for n in sessions for w in workers
+            [how, *run(n, w, how, capture, calibration, store, name, tmp)]
+            for how in labels
+            for n in sessions
+            for w in workers
         ]
     base = float(np.percentile(baseline, 50))
     print(
@@ -198,6 +209,7 @@ def bench(seconds: float, sessions: list[int], workers: list[int], name: str) ->
         f"Live service, {seconds:g} s of 60 fps x 2 cameras per session, method {name} "
         f"(latency ms; target p99 <= {TARGET_P99_MS:g} ms at 4 sessions)",
         [
+            "labels",
             "sessions",
             "workers",
             "packets",
@@ -214,8 +226,8 @@ def bench(seconds: float, sessions: list[int], workers: list[int], name: str) ->
     )
     print_table(
         "Ratios to the baseline step p50",
-        ["sessions", "workers", "server p50 / step", "e2e p99 / step"],
-        [[r[0], r[1], r[5] / base, r[8] / base] for r in rows],
+        ["labels", "sessions", "workers", "server p50 / step", "e2e p99 / step"],
+        [[r[0], r[1], r[2], r[6] / base, r[9] / base] for r in rows],
     )
     return rows
 
@@ -227,8 +239,9 @@ def main() -> None:
     parser.add_argument("--sessions", type=int, nargs="+", default=[1, 4, 8])
     parser.add_argument("--workers", type=int, nargs="+", default=[0, 2])
     parser.add_argument("--method", default="samba", help="reconstruction method")
+    parser.add_argument("--labels", nargs="+", default=["server", "nodes"], choices=LABELLERS)
     args = parser.parse_args()
-    bench(args.seconds, args.sessions, args.workers, args.method)
+    bench(args.seconds, args.sessions, args.workers, args.method, args.labels)
 
 
 if __name__ == "__main__":

@@ -22,13 +22,14 @@ from pathlib import Path
 import numpy as np
 
 from samba.camera import Camera, CameraGroup
-from samba.cross_view_labels import CrossViewLabeller, CrossViewSettings
+from samba.cross_view_labels import CrossViewSettings
 from samba.frame_io import read_frames, write_video
 from samba.lead_in import LeadIn, standing_lead_in
 from samba.marker_detection import detect_markers, static_mask
 from samba.marker_render import RenderOptions, film_empty_stage, render
-from samba.marker_tracking import REFERENCE_FOCAL_PX, MarkerTracker, TrackerSettings
-from samba.skeleton import N_MARKERS, markers_of, standing_pose
+from samba.marker_tracking import REFERENCE_FOCAL_PX
+from samba.skeleton import N_MARKERS, markers_of
+from samba.stage_tracking import StageTracker
 from samba.triangulation import triangulate
 
 EMPTY_STAGE_FRAMES = 10
@@ -142,27 +143,18 @@ def track_cameras(
     pose where the lead-in stands; with `settings.cross_view`, lost labels are found
     again across the cameras every frame (`CrossViewLabeller`) and handed back to the
     trackers."""
-    where = (lead_in.position, lead_in.heading_deg, lead_in.height)
-    trackers = [
-        MarkerTracker.from_standard_pose(
-            camera, *where, TrackerSettings.for_camera(camera, **settings.tracker)
-        )
-        for camera in cameras
-    ]
-    labeller = (
-        CrossViewLabeller(cameras, markers_of(standing_pose(*where)), settings.cross_view)
-        if settings.cross_view is not None
-        else None
+    stage = StageTracker.from_standard_pose(
+        cameras,
+        lead_in.position,
+        lead_in.heading_deg,
+        lead_in.height,
+        settings.tracker,
+        settings.cross_view,
     )
     frames = len(centroids[0])
     out = np.full((len(cameras), frames, N_MARKERS, 2), np.nan)
     for f in range(frames):
-        labelled = np.stack([t.step(c[f]) for t, c in zip(trackers, centroids, strict=True)])
-        if labeller is not None:
-            labelled, found = labeller.step(labelled, [t.anonymous_blobs for t in trackers])
-            for event in found:
-                trackers[event.camera].reacquire(event.label, event.pixel)
-        out[:, f] = labelled
+        out[:, f] = stage.step([c[f] for c in centroids])
     return out
 
 

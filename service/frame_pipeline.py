@@ -1,6 +1,8 @@
 """`FramePipeline`: what a capture session computes for each frame.
 
-From the labelled pixels of a frame's cameras: undistort them, triangulate the 8 markers
+From the marker pixels of a frame's cameras (`CameraMarkers`): label them on the server
+(`samba.stage_tracking`, unless the session keeps the nodes' labels), undistort them,
+triangulate the 8 markers
 (DLT with outlier gating), reconstruct the 13 joints with the session's pose database
 and method (`samba.reconstruction.Reconstructor.step`, the same code as the offline
 reconstruction), retarget them to the avatar (`export.live_retarget`) and hand the VMC
@@ -25,21 +27,53 @@ from export.avatar_file import read_avatar_rig
 from export.humanoid import HumanoidRig
 from export.live_retarget import LiveRetarget
 from samba.calibration_file import read_calibration
+from samba.cross_view_labels import CrossViewSettings
 from samba.methods import method
 from samba.reconstruction import PoseEstimate
 from samba.skeleton import N_MARKERS, mirror_poses
+from samba.stage_tracking import StageTracker
 from samba.triangulation import Triangulation
 from service.session_config import SessionConfig
 from service.vmc import VmcSender, frame_bundles, unity_values
 
 
+@dataclass(frozen=True, eq=False)
+class CameraMarkers:
+    """One frame's marker pixels from every camera of a session: `labels` (c, 8, 2) raw
+    pixels as the nodes labelled them (NaN: missing, or no packet from that camera);
+    `blobs` per camera the (n, 2) raw pixels its node left unlabelled, None where no
+    packet came."""
+
+    labels: np.ndarray
+    blobs: tuple[np.ndarray | None, ...]
+
+    @classmethod
+    def from_labels(cls, labels: np.ndarray) -> CameraMarkers:
+        """Labels (c, 8, 2) from every camera, without unlabelled blobs."""
+        return cls(np.asarray(labels), tuple(np.zeros((0, 2)) for _ in labels))
+
+    def centroids(self) -> list[np.ndarray | None]:
+        """Every blob each camera saw (n, 2), labelled or not; None where no packet came."""
+        return [
+            None if extra is None else np.concatenate([own[~np.isnan(own).any(axis=-1)], extra])
+            for own, extra in zip(self.labels, self.blobs, strict=True)
+        ]
+
+
+FrameInput = CameraMarkers | np.ndarray
+"""What a pipeline computes a frame from: a marker session's `CameraMarkers`, or a pose
+session's pose (13, 3) m."""
+
+
 @dataclass(frozen=True)
 class FrameOutput:
-    """One computed frame: `markers` (8, 3) triangulated meters (NaN = missing), the
-    reconstruction `estimate`, the `latency` in seconds from the frame's last packet to
-    its VMC bundles sent, and `vmc_errors`, the VMC datagrams the network refused so far
-    in this session."""
+    """One computed frame: `labels` (c, 8, 2) the raw pixels triangulated (the server's
+    labels or the nodes'; (0, 8, 2) for a pose session), `markers` (8, 3) triangulated
+    meters (NaN = missing), the reconstruction `estimate`, the `latency` in seconds from
+    the frame's last packet to its VMC bundles sent, and `vmc_errors`, the VMC datagrams
+    the network refused so far in this session."""
 
+    labels: np.ndarray
     markers: np.ndarray
     estimate: PoseEstimate
     latency: float
@@ -95,24 +129,44 @@ class FramePipeline:
             )
         self.reconstructor = chosen.build(index)
         self.avatar = AvatarStream(config, clock_zero)
+        self._stage: StageTracker | None = None
+        self.server_labels = config.labels == "server" or (
+            config.labels == "auto" and len(self.cameras) >= 3
+        )
+        """Whether the server finds the labels the nodes lost (`labels`)."""
 
     @property
     def database_poses(self) -> int:
         """How many poses the reconstruction searches."""
         return len(self.reconstructor.source.poses)
 
-    def process(self, pixels: np.ndarray, frame_time: float, last_arrival: float) -> FrameOutput:
-        """Compute one frame from `pixels` (cameras, 8, 2) as the cameras measured them
-        (NaN = not seen), captured at `frame_time` and complete at `last_arrival` (s)."""
+    def process(self, frame: CameraMarkers, frame_time: float, last_arrival: float) -> FrameOutput:
+        """Compute one frame from the cameras' marker pixels `frame`, captured at
+        `frame_time` and complete at `last_arrival` (s)."""
+        labels = self._label(frame)
         views = Triangulation.from_views(
             self._projections,
-            self.cameras.undistort(pixels),
+            self.cameras.undistort(labels),
             gate_px=self.config.gate_px or None,
         )
         markers = views.points
         estimate = self.reconstructor.step(markers)
         errors = self.avatar.send(estimate.pose, frame_time)
-        return FrameOutput(markers, estimate, time.time() - last_arrival, errors)
+        return FrameOutput(labels, markers, estimate, time.time() - last_arrival, errors)
+
+    def _label(self, frame: CameraMarkers) -> np.ndarray:
+        """The labels (c, 8, 2) to triangulate: the nodes' (without `server_labels`, and
+        until every camera has sent a frame), else the nodes' with the ones they lost
+        found again by the server from all the blobs."""
+        if not self.server_labels:
+            return frame.labels
+        if self._stage is None:
+            if any(blobs is None for blobs in frame.blobs):
+                return frame.labels
+            self._stage = StageTracker.from_labels(
+                self.cameras, frame.labels, cross_view=CrossViewSettings()
+            )
+        return self._stage.step(frame.centroids(), known=frame.labels)
 
     def close(self) -> None:
         """Close the VMC socket."""
@@ -135,7 +189,8 @@ class PosePipeline:
         estimate = PoseEstimate(np.asarray(pose, dtype=np.float64), 0.0, 0, True, False)
         errors = self.avatar.send(estimate.pose, frame_time)
         markers = np.full((N_MARKERS, 3), np.nan)
-        return FrameOutput(markers, estimate, time.time() - last_arrival, errors)
+        labels = np.zeros((0, N_MARKERS, 2))
+        return FrameOutput(labels, markers, estimate, time.time() - last_arrival, errors)
 
     def close(self) -> None:
         """Close the VMC socket."""

@@ -4,7 +4,9 @@ A node runs beside one camera of the capture stage. For every frame it finds the
 blobs (`samba.marker_detection`), keeps the 8 marker labels on them
 (`samba.marker_tracking`, started from the standard pose the subject holds when capture
 begins) and sends the labelled pixels to the server as one `service.packet.MarkerPacket`:
-camera id, frame sequence, capture timestamp, 8 x (u, v) with NaN for missing.
+camera id, frame sequence, capture timestamp, 8 x (u, v) with NaN for missing, and the
+blobs its tracker left unlabelled (at most `MAX_BLOBS`), from which a server that labels
+the markers itself finds lost labels again.
 
 Frames come from a feed, each frame a `Capture` with its capture time:
 
@@ -47,7 +49,7 @@ from samba.marker_render import RenderOptions, film_empty_stage, render_camera
 from samba.marker_tracking import MarkerTracker
 from samba.skeleton import N_JOINTS, N_MARKERS
 from samba.synthetic import generate
-from service.packet import MarkerPacket, PosePacket, encode
+from service.packet import MAX_BLOBS, MarkerPacket, PosePacket, encode
 
 DEFAULT_PORT = 9870
 """The UDP port the server (`samba serve`) listens on for camera packets by default."""
@@ -101,14 +103,16 @@ class SubjectStart:
 
 class Node(Protocol):
     """What `run_node` drives: a frame (H, W) or (H, W, 3) in, the values to send out
-    ((8, 2) markers, (13, 3) pose, or None: nothing yet); `MISSING` says what its
-    summary's missing rate counts."""
+    ((8, 2) markers, (13, 3) pose, or None: nothing yet) and the frame's unlabelled
+    blobs (n, 2) pixels; `MISSING` says what its summary's missing rate counts."""
 
     MISSING: str
 
     def restart(self) -> None: ...
 
     def process(self, frame: np.ndarray, name: str = "frame") -> np.ndarray | None: ...
+
+    def unlabelled(self) -> np.ndarray: ...
 
 
 class CameraNode:
@@ -161,6 +165,10 @@ class CameraNode:
         blobs = detect_markers(frame, threshold=self.threshold, mask=self.mask, name=name)
         return self._tracker.step(blobs.centroids)
 
+    def unlabelled(self) -> np.ndarray:
+        """The blobs (n, 2) pixels of the last frame no label took, the first `MAX_BLOBS`."""
+        return self._tracker.anonymous_blobs[:MAX_BLOBS]
+
 
 class PacketSender:
     """A UDP socket sending each frame's markers to the server as one `MarkerPacket`.
@@ -198,13 +206,27 @@ class PacketSender:
             self._socket.close()
             raise InputError(f"{host}:{port}", f"cannot reach the server: {exc}") from None
 
-    def send(self, sequence: int, timestamp: float, values: np.ndarray) -> int:
+    def send(
+        self,
+        sequence: int,
+        timestamp: float,
+        values: np.ndarray,
+        blobs: np.ndarray | None = None,
+    ) -> int:
         """Send one frame: `sequence` 0..2^32 - 1, capture `timestamp` seconds, and
-        either the markers (8, 2) pixels, NaN = missing (a `MarkerPacket`) or a pose
-        (13, 3) world meters (a `PosePacket`, from a markerless node). Returns the bytes
-        sent, 0 if the send failed."""
-        kind = PosePacket if np.shape(values) == (N_JOINTS, 3) else MarkerPacket
-        data = encode(kind(self.camera, sequence, timestamp, values, self.session), self.key)
+        either the markers (8, 2) pixels, NaN = missing, with up to `MAX_BLOBS`
+        unlabelled `blobs` (n, 2) pixels (a `MarkerPacket`) or a pose (13, 3) world
+        meters (a `PosePacket`, from a markerless node; `blobs` must be None or empty).
+        Returns the bytes sent, 0 if the send failed."""
+        header = (self.camera, sequence, timestamp)
+        if np.shape(values) == (N_JOINTS, 3):
+            if blobs is not None and len(blobs):
+                raise ValueError("a pose packet carries no blobs")
+            packet: MarkerPacket | PosePacket = PosePacket(*header, values, self.session)
+        else:
+            extra = np.zeros((0, 2)) if blobs is None else blobs
+            packet = MarkerPacket(*header, values, self.session, extra)
+        data = encode(packet, self.key)
         try:
             sent = self._socket.send(data)
         except OSError as exc:
@@ -458,7 +480,7 @@ def run_node(
             values = node.process(capture.frame, capture.name)
             tally.process_s += time.perf_counter() - tic
             if values is not None:
-                sender.send(sequence, capture.timestamp, values)
+                sender.send(sequence, capture.timestamp, values, node.unlabelled())
             tally.count(values, capture.deadline)
             sequence = (sequence + 1) % _SEQUENCE_MODULUS
             if status is not None and tally.status_due():

@@ -1,7 +1,8 @@
 """The camera-node → server wire format: one UDP datagram per camera frame.
 
 A camera node sends, for each frame, the 8 labelled marker positions its tracker found
-(`samba.marker_tracking`) as one `MarkerPacket`. `encode` and `decode` turn it into bytes
+(`samba.marker_tracking`) and the blobs its tracker left unlabelled as one
+`MarkerPacket`. `encode` and `decode` turn it into bytes
 and back; `decode` raises `PacketError` (and nothing else) on any datagram it drops,
 with a `reason` from a small fixed set the server counts drops by.
 
@@ -9,29 +10,36 @@ A markerless node (`samba node --mode silhouette`) tracks the whole body itself 
 sends a `PosePacket` instead: the same header with flags bit 1 set, and the 13 joints
 (world meters, +Y up, `samba.skeleton.JOINT_NAMES` order) where the markers would be.
 
-Layout (version 1, little-endian, no padding; 100 bytes, 116 with the tag; a pose packet
-192 and 208):
+Layout (version 1, little-endian, no padding; 100 bytes, plus 1 + 8 n with n unlabelled
+blobs, plus 16 with the tag; a pose packet 192 bytes, 208 with the tag):
 
 | offset | size | type | field | meaning |
 |---:|---:|---|---|---|
 | 0 | 4 | bytes | magic | `b"SMBA"` |
 | 4 | 1 | uint8 | version | 1 |
-| 5 | 1 | uint8 | flags | bit 0: a tag ends the packet; bit 1: a pose packet; bits 2-7: 0 |
+| 5 | 1 | uint8 | flags | bit 0: tag at the end; bit 1: pose packet; bit 2: blobs; bits 3-7: 0 |
 | 6 | 2 | uint16 | camera | camera id, 0..65535 |
 | 8 | 4 | uint32 | sequence | frame counter of this camera, wraps from 2^32 - 1 to 0 |
 | 12 | 8 | float64 | timestamp | capture time of the frame, seconds on the node's clock |
 | 20 | 16 | bytes | session | ASCII id `[A-Za-z0-9._-]`, 0..16 characters, NUL-padded |
 | 36 | 64 | float32[8][2] | markers | (u, v) pixels per marker in marker order, NaN = missing |
-| 100 | 16 | bytes | tag | only if flags bit 0: HMAC-SHA256(key, bytes 0..99), first 16 bytes |
+| 100 | 1 | uint8 | count | only if flags bit 2: n, the blobs that follow, 1..`MAX_BLOBS` |
+| 101 | 8n | float32[n][2] | blobs | only if flags bit 2: (u, v) of blobs no label took |
+| 100 + b | 16 | bytes | tag | only if flags bit 0: HMAC-SHA256(key, the b + 100 bytes before) |
 
-In a pose packet the 156 bytes from offset 36 are the pose, float32[13][3], all finite,
-and the tag (at offset 192) covers bytes 0..191.
+Here b = 1 + 8n with blobs, else 0; the tag is the first 16 bytes of the HMAC. In a pose
+packet the 156 bytes from offset 36 are the pose, float32[13][3], all finite, flags bit
+2 is 0 and the tag follows at offset 192.
 
 Markers follow `samba.skeleton.MARKER_NAMES` (l/r shoulder, l/r wrist, l/r knee, l/r foot)
 with pixels in the OpenCV convention. A missing marker has both coordinates NaN; a
-marker with one NaN coordinate or an infinite one is invalid. The timestamp must be
-finite. The session id lets a server ignore nodes still streaming for another capture
-stage or an earlier session; empty means none.
+marker with one NaN coordinate or an infinite one is invalid. The blobs are bright spots
+the node's tracker did not label (a marker whose label it lost, or a stray reflection):
+a server that labels the markers itself (`samba.stage_tracking`) uses them with the
+labelled ones; a packet without blobs has flags bit 2 clear and ends after the markers,
+exactly as a node that sends none always did. The timestamp must be finite. The session
+id lets a server ignore nodes still streaming for another capture stage or an earlier
+session; empty means none.
 
 Signing: with a shared key, the sender appends the tag and sets flags bit 0; a server
 with a key drops untagged packets ("missing tag") and packets whose tag does not match
@@ -43,7 +51,9 @@ sequence numbers it has already passed (`sequence_delta`). Use a random key of 3
 `decode` checks, in this order, and drops the datagram with the first reason that
 applies: longer than `MAX_PACKET_BYTES` ("too long"); shorter than magic, version and
 flags ("too short"); magic ("bad magic"); version or an unknown flag bit ("unsupported
-version"); shorter than the flags announce ("too short") or longer ("bad length"); tag
+version"); blobs announced in a pose packet ("unsupported version"); a blob count outside
+1..`MAX_BLOBS` ("bad values"); shorter than the flags and the blob count announce
+("too short") or longer ("bad length"); tag
 present without a key ("unexpected tag") or absent with one ("missing tag"); the tag
 ("bad tag"); the field values ("bad values"). Every valid packet has exactly one
 encoding, so `encode(decode(data, key), key) == data`.
@@ -56,7 +66,7 @@ import hmac
 import math
 import re
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +80,10 @@ FLAG_TAG = 0x01
 """Flags bit: an HMAC tag ends the packet."""
 FLAG_POSE = 0x02
 """Flags bit: a `PosePacket`, 13 joints where a `MarkerPacket` has its markers."""
+FLAG_BLOBS = 0x04
+"""Flags bit: a blob count and the unlabelled blobs follow a `MarkerPacket`'s markers."""
+MAX_BLOBS = 16
+"""Most unlabelled blobs one `MarkerPacket` carries."""
 TAG_BYTES = 16
 """Length of the truncated HMAC-SHA256 tag."""
 SESSION_BYTES = 16
@@ -99,8 +113,10 @@ class MarkerPacket:
     `camera` is 0..65535, `sequence` 0..2^32 - 1 (the sender wraps it), `timestamp` the
     finite capture time in seconds, `markers` (8, 2) pixels stored as a read-only float32
     copy (NaN rows = missing), `session` an ASCII id of at most 16 characters from
-    `[A-Za-z0-9._-]`, empty for none. Invalid values raise `ValueError`. Packets compare
-    equal when all fields are equal, NaN markers included.
+    `[A-Za-z0-9._-]`, empty for none, `blobs` (n, 2) pixels of at most `MAX_BLOBS`
+    unlabelled blobs, all finite, stored as a read-only float32 copy. Invalid values
+    raise `ValueError`. Packets compare equal when all fields are equal, NaN markers
+    included.
     """
 
     camera: int
@@ -108,6 +124,7 @@ class MarkerPacket:
     timestamp: float
     markers: np.ndarray
     session: str = ""
+    blobs: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=np.float32))
 
     def __post_init__(self) -> None:
         markers = np.array(self.markers, dtype=np.float32)
@@ -115,6 +132,15 @@ class MarkerPacket:
             raise ValueError(f"markers have shape {markers.shape}, expected ({N_MARKERS}, 2)")
         markers.flags.writeable = False
         object.__setattr__(self, "markers", markers)
+        blobs = np.array(self.blobs, dtype=np.float32)
+        if blobs.size == 0:
+            blobs = blobs.reshape(0, 2)
+        if blobs.ndim != 2 or blobs.shape[1] != 2 or len(blobs) > MAX_BLOBS:
+            raise ValueError(f"blobs have shape {blobs.shape}, expected (0..{MAX_BLOBS}, 2)")
+        if not np.isfinite(blobs).all():
+            raise ValueError("a blob coordinate is NaN or infinite")
+        blobs.flags.writeable = False
+        object.__setattr__(self, "blobs", blobs)
         _check_header(self.camera, self.sequence, self.timestamp, self.session)
         missing = np.isnan(markers)
         if not (np.isfinite(markers) | missing).all():
@@ -126,8 +152,10 @@ class MarkerPacket:
         """All fields equal; markers compared with NaN equal to NaN."""
         if not isinstance(other, MarkerPacket):
             return NotImplemented
-        return _header(self) == _header(other) and np.array_equal(
-            self.markers, other.markers, equal_nan=True
+        return (
+            _header(self) == _header(other)
+            and np.array_equal(self.markers, other.markers, equal_nan=True)
+            and np.array_equal(self.blobs, other.blobs)
         )
 
 
@@ -170,11 +198,13 @@ def encode(packet: Packet, key: bytes | None = None) -> bytes:
     _check_key(key)
     pose = isinstance(packet, PosePacket)
     values = packet.pose if pose else packet.markers
+    blobs = 0 if pose else len(packet.blobs)
+    flags = (FLAG_TAG if key is not None else 0) | (FLAG_POSE if pose else 0)
     body = (
         _HEADER.pack(
             MAGIC,
             VERSION,
-            (FLAG_TAG if key is not None else 0) | (FLAG_POSE if pose else 0),
+            flags | (FLAG_BLOBS if blobs else 0),
             packet.camera,
             packet.sequence,
             packet.timestamp,
@@ -182,6 +212,8 @@ def encode(packet: Packet, key: bytes | None = None) -> bytes:
         )
         + values.astype(_MARKER_DTYPE, copy=False).tobytes()
     )
+    if blobs:
+        body += bytes([blobs]) + packet.blobs.astype(_MARKER_DTYPE, copy=False).tobytes()
     return body if key is None else body + _tag(key, body)
 
 
@@ -205,11 +237,20 @@ def decode(data: bytes, key: bytes | None = None, *, source: str = "packet") -> 
         raise PacketError(
             source, "unsupported version", f"version {version}, this server reads {VERSION}"
         )
-    if flags & ~(FLAG_TAG | FLAG_POSE):
+    if flags & ~(FLAG_TAG | FLAG_POSE | FLAG_BLOBS):
         raise PacketError(source, "unsupported version", f"unknown flags 0x{flags:02x}")
     tagged = bool(flags & FLAG_TAG)
     pose = bool(flags & FLAG_POSE)
-    body = POSE_BODY_BYTES if pose else BODY_BYTES
+    blobs = 0
+    if flags & FLAG_BLOBS:
+        if pose:
+            raise PacketError(source, "unsupported version", "blobs announced in a pose packet")
+        if size <= BODY_BYTES:
+            raise PacketError(source, "too short", f"{size} bytes, blobs announced")
+        blobs = data[BODY_BYTES]
+        if not 1 <= blobs <= MAX_BLOBS:
+            raise PacketError(source, "bad values", f"{blobs} blobs, expected 1..{MAX_BLOBS}")
+    body = POSE_BODY_BYTES if pose else BODY_BYTES + (1 + 8 * blobs if blobs else 0)
     expected = body + (TAG_BYTES if tagged else 0)
     if size < expected:
         raise PacketError(source, "too short", f"{size} bytes, expected {expected}")
@@ -229,12 +270,14 @@ def decode(data: bytes, key: bytes | None = None, *, source: str = "packet") -> 
             joints = np.frombuffer(data, _MARKER_DTYPE, 3 * N_JOINTS, HEADER_BYTES)
             return PosePacket(camera, sequence, timestamp, joints.reshape(N_JOINTS, 3), name)
         markers = np.frombuffer(data, _MARKER_DTYPE, 2 * N_MARKERS, HEADER_BYTES)
+        extra = np.frombuffer(data, _MARKER_DTYPE, 2 * blobs, BODY_BYTES + 1) if blobs else ()
         return MarkerPacket(
             camera=camera,
             sequence=sequence,
             timestamp=timestamp,
             markers=markers.reshape(N_MARKERS, 2),
             session=name,
+            blobs=np.reshape(extra, (-1, 2)),
         )
     except ValueError as exc:
         raise PacketError(source, "bad values", str(exc)) from None

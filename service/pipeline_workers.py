@@ -30,12 +30,17 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
 
-import numpy as np
 from threadpoolctl import threadpool_limits
 
 from samba.errors import InputError
 from service.errors import ServiceError
-from service.frame_pipeline import FrameOutput, FramePipeline, PosePipeline, open_pipeline
+from service.frame_pipeline import (
+    FrameInput,
+    FrameOutput,
+    FramePipeline,
+    PosePipeline,
+    open_pipeline,
+)
 from service.session_config import SessionConfig
 
 LOG = logging.getLogger(__name__)
@@ -69,10 +74,10 @@ class InlinePipelines:
         return pipeline.database_poses
 
     def submit(
-        self, session: str, sequence: int, pixels: np.ndarray, frame_time: float, arrival: float
+        self, session: str, sequence: int, values: FrameInput, frame_time: float, arrival: float
     ) -> None:
         """Compute frame `sequence` of `session` now (`FramePipeline.process`)."""
-        self._deliver(_compute(self._pipelines, session, sequence, pixels, frame_time, arrival))
+        self._deliver(_compute(self._pipelines, session, sequence, values, frame_time, arrival))
 
     def close_session(self, session: str) -> None:
         """Close the session's pipeline."""
@@ -130,7 +135,7 @@ class WorkerPipelines:
         return min(self._workers, key=lambda w: len(w.sessions) + len(w.replies))
 
     def submit(
-        self, session: str, sequence: int, pixels: np.ndarray, frame_time: float, arrival: float
+        self, session: str, sequence: int, values: FrameInput, frame_time: float, arrival: float
     ) -> None:
         """Send frame `sequence` of `session` to its worker; the result comes to `deliver`."""
         worker = self._owner.get(session)
@@ -139,7 +144,7 @@ class WorkerPipelines:
             return
         worker.in_flight[session, sequence] = None
         try:
-            worker.send(("frame", session, sequence, pixels, frame_time, arrival))
+            worker.send(("frame", session, sequence, values, frame_time, arrival))
         except OSError as exc:
             del worker.in_flight[session, sequence]
             self._deliver(FrameDone(session, sequence, error=f"worker unavailable: {exc}"))
@@ -276,7 +281,7 @@ def _compute(
     pipelines: dict[str, FramePipeline | PosePipeline],
     session: str,
     sequence: int,
-    pixels: np.ndarray,
+    values: FrameInput,
     frame_time: float,
     arrival: float,
 ) -> FrameDone:
@@ -284,7 +289,7 @@ def _compute(
     if pipeline is None:
         return FrameDone(session, sequence, error="the session is not open")
     try:
-        output = pipeline.process(pixels, frame_time, arrival)
+        output = pipeline.process(values, frame_time, arrival)
     except Exception as exc:  # a bug in one frame must not stop the session
         LOG.exception("session %s: frame %d failed", session, sequence)
         return FrameDone(session, sequence, error=f"{type(exc).__name__}: {exc}")

@@ -18,7 +18,7 @@ from service.errors import ServiceError
 from service.packet import read_key_file
 from service.serve import DEFAULT_WORKERS, HTTP_PORT, UDP_PORT, LiveServer
 from service.session import CaptureSession
-from service.session_config import INPUTS, SessionConfig, read_sessions
+from service.session_config import INPUTS, LABELLERS, SessionConfig, read_sessions
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -51,6 +51,14 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     one.add_argument("--avatar", help="avatar file (.vrm, .glb) whose rig the VMC stream uses")
     one.add_argument("--wait-ms", type=float, default=50.0, help="wait for late cameras (ms)")
+    one.add_argument(
+        "--labels",
+        choices=LABELLERS,
+        default="auto",
+        help="who labels the markers: the server finds the labels the nodes lost from "
+        "every camera's blobs (server), or the nodes' labels as sent (nodes); auto "
+        "(default): server with 3 or more cameras",
+    )
     net = parser.add_argument_group("network")
     net.add_argument(
         "--udp",
@@ -124,6 +132,7 @@ def _configs(args: argparse.Namespace) -> list[SessionConfig]:
         "fps": args.fps,
         "vmc": [f"{host}:{port}" for host, port in args.vmc],
         "wait_ms": args.wait_ms,
+        "labels": args.labels,
     }
     for key, value in (("calibration", args.calib), ("database", args.db), ("avatar", args.avatar)):
         if value:

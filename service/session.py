@@ -1,8 +1,9 @@
 """`CaptureSession`: one subject's live capture, from camera packets to avatar poses.
 
 Per frame assembled by `FrameSync` (one packet per camera, or at least `min_cameras`
-after waiting `wait_ms`), the session hands the cameras' labelled pixels to its
-`FramePipeline` (triangulation, reconstruction, retargeting, VMC out; in the event loop
+after waiting `wait_ms`), the session hands the cameras' marker pixels, labelled and
+unlabelled (`CameraMarkers`), to its `FramePipeline` (labelling, triangulation,
+reconstruction, retargeting, VMC out; in the event loop
 or in a worker process, see `service.pipeline_workers`). A session whose `input` is
 "poses" takes the pose packets of one markerless node instead (whatever camera id it
 sends), and its `PosePipeline` only retargets and sends them. When the computed frame comes
@@ -29,7 +30,7 @@ import numpy as np
 from samba.calibration_file import read_calibration
 from samba.skeleton import N_MARKERS
 from service.errors import ServiceError
-from service.frame_pipeline import FrameOutput
+from service.frame_pipeline import CameraMarkers, FrameInput, FrameOutput
 from service.frame_sync import FrameSync, SyncedFrame
 from service.metrics import LatencyWindow
 from service.packet import Packet, PosePacket
@@ -49,7 +50,7 @@ class Pipelines(Protocol):
     def open(self, config: SessionConfig, clock_zero: float) -> int: ...
 
     def submit(
-        self, session: str, sequence: int, pixels: np.ndarray, frame_time: float, arrival: float
+        self, session: str, sequence: int, values: FrameInput, frame_time: float, arrival: float
     ) -> None: ...
 
     def close_session(self, session: str) -> None: ...
@@ -147,12 +148,16 @@ class CaptureSession:
         return self.sync.deadline()
 
     def _submit(self, frame: SyncedFrame) -> None:
+        values: FrameInput
         if self.cameras is None:
             values = frame.packets[0].pose
         else:
-            values = np.full((len(self.cameras), N_MARKERS, 2), np.nan)
+            labels = np.full((len(self.cameras), N_MARKERS, 2), np.nan)
+            blobs: list[np.ndarray | None] = [None] * len(self.cameras)
             for camera, packet in frame.packets.items():
-                values[camera] = packet.markers
+                labels[camera] = packet.markers
+                blobs[camera] = packet.blobs
+            values = CameraMarkers(labels, tuple(blobs))
         self._sequence += 1
         self._in_flight[self._sequence] = frame
         self._pipelines.submit(self.name, self._sequence, values, frame.time, frame.last_arrival)
@@ -173,7 +178,7 @@ class CaptureSession:
                 max(0, round(frame.time * 1e9)),
                 estimate,
                 markers,
-                {} if self.poses else {str(c): p.markers for c, p in frame.packets.items()},
+                {str(c): output.labels[c] for c in frame.packets} if not self.poses else {},
             )
         if self._viewer is not None and self._viewer.clients(self.name):
             self._viewer.publish(

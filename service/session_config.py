@@ -16,12 +16,24 @@ A session comes from `samba serve` flags, from a `[[session]]` table of a TOML f
 | `wait_ms` | number | 50 | how long a frame waits for late cameras |
 | `min_cameras` | integer | 2 | fewest cameras a frame is reconstructed from |
 | `gate_px` | number | 10 | triangulation outlier gate, pixels (0 = none) |
+| `labels` | string | `"auto"` | who labels the markers: `"server"`, `"nodes"` or `"auto"` (below) |
 
 Relative paths in a file are relative to the file's folder. A `"markers"` session
 (the default) takes the marker packets of its calibrated cameras and needs
 `calibration` and `database`; a `"poses"` session takes the pose packets of one
 markerless node (`samba node --mode silhouette`), which tracks the body itself, and
-needs neither (`method`, `min_cameras` and `gate_px` do not apply).
+needs neither (`method`, `min_cameras`, `gate_px` and `labels` do not apply).
+
+With `labels = "server"` the server keeps the labels the nodes sent and
+finds the ones they lost again from every camera's blobs (labelled and unlabelled),
+with a tracker per camera and the cross-view labelling (`samba.stage_tracking`), started
+at the first frame every camera sent: a marker whose label a node dropped when it
+crossed another comes back as soon as the other cameras tell which marker it is, and a
+label whose views disagree is dropped. It costs the server about 2 ms per camera and
+frame (`bench/bench_service.py --labels`). With `"nodes"` it triangulates the nodes'
+labels as they are. `"auto"` (the default) is `"server"` with three or more cameras and
+`"nodes"` with two, where labels found from the other camera are rare (a blob on an
+epipolar line may be another marker) and the cost is not worth it.
 """
 
 from __future__ import annotations
@@ -45,6 +57,9 @@ SESSION_NAME = re.compile(r"[A-Za-z0-9._-]{1,16}")
 INPUTS = ("markers", "poses")
 """What a session's camera nodes send (`input`)."""
 
+LABELLERS = ("auto", "server", "nodes")
+"""Who labels a marker session's markers (`labels`)."""
+
 _KEYS = (
     "name",
     "input",
@@ -57,6 +72,7 @@ _KEYS = (
     "wait_ms",
     "min_cameras",
     "gate_px",
+    "labels",
 )
 
 
@@ -75,6 +91,7 @@ class SessionConfig:
     min_cameras: int = 2
     gate_px: float = 10.0
     input: str = "markers"
+    labels: str = "auto"
 
     @classmethod
     def from_mapping(
@@ -101,6 +118,11 @@ class SessionConfig:
         method = _string(values, "method", where, "samba")
         if method not in METHODS:
             raise ServiceError(where, f"unknown method {method!r}; known: {', '.join(METHODS)}")
+        labels = _string(values, "labels", where, "auto")
+        if labels not in LABELLERS:
+            raise ServiceError(
+                where, f"labels must be one of {', '.join(LABELLERS)}, got {labels!r}"
+            )
         vmc = values.get("vmc", [])
         if not isinstance(vmc, list) or not all(isinstance(v, str) for v in vmc):
             raise ServiceError(where, 'vmc must be a list of "HOST:PORT" strings')
@@ -120,6 +142,7 @@ class SessionConfig:
             min_cameras=int(_number(values, "min_cameras", where, 2, integer=True)),
             gate_px=_number(values, "gate_px", where, 10.0, allow_zero=True),
             input=kind,
+            labels=labels,
         )
 
 

@@ -65,6 +65,10 @@ class SilhouetteNode:
         self._seen = True
         return self._tracker.step(mask).pose
 
+    def unlabelled(self) -> np.ndarray:
+        """No blobs (0, 2): a markerless node sends poses, not markers."""
+        return np.zeros((0, 2))
+
 
 class SyntheticStageFeed:
     """The body model `body` doing `motion` (`samba.synthetic.generate(motion, seconds,

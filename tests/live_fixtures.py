@@ -29,8 +29,15 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def config(calibration: Path, store: Path, **changes: object) -> SessionConfig:
-    """Session "stage" on `calibration` and `store`, with other keys changed."""
-    values = {"name": "stage", "calibration": str(calibration), "database": str(store)}
+    """Session "stage" on `calibration` and `store`, with other keys changed. It keeps
+    the nodes' labels: `SyntheticCapture` sends every marker's true label, and the tests
+    compare with the offline reconstruction of exactly those pixels."""
+    values = {
+        "name": "stage",
+        "calibration": str(calibration),
+        "database": str(store),
+        "labels": "nodes",
+    }
     return SessionConfig.from_mapping({**values, **changes}, "test")
 
 

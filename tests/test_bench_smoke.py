@@ -82,11 +82,12 @@ _spec_service.loader.exec_module(bench_service)
 
 
 def test_service_benchmark_prints_its_latency_table(capsys: pytest.CaptureFixture[str]) -> None:
-    (row,) = bench_service.bench(1.0, [1], [1], "samba")
+    (row,) = bench_service.bench(1.0, [1], [1], "samba", ["server"])
     out = capsys.readouterr().out
     assert "Baseline, same run: Reconstructor.step (samba)" in out and "e2e p99" in out
-    assert row[:5] == [1, 1, 120, 0, 0]  # 60 frames x 2 cameras in, every frame out, received
-    assert all(isinstance(v, float) and v > 0 for v in row[5:10])
+    # 60 frames x 2 cameras in, every frame out, received
+    assert row[:6] == ["server", 1, 1, 120, 0, 0]
+    assert all(isinstance(v, float) and v > 0 for v in row[6:11])
 
 
 _spec_silhouette = importlib.util.spec_from_file_location(

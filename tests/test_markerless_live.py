@@ -73,6 +73,10 @@ class Recording:
         self.sent.append(pose)
         return pose
 
+    def unlabelled(self) -> np.ndarray:
+        """The node's unlabelled blobs (none)."""
+        return self.node.unlabelled()
+
 
 def paced(frames: np.ndarray, start: float) -> Iterator[Capture]:
     """The frames captured in real time at FPS from `start` (UNIX seconds), as a camera

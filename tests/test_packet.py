@@ -21,8 +21,10 @@ from samba.errors import InputError
 from service.errors import PacketError
 from service.packet import (
     BODY_BYTES,
+    FLAG_BLOBS,
     FLAG_POSE,
     HEADER_BYTES,
+    MAX_BLOBS,
     MAX_PACKET_BYTES,
     POSE_BODY_BYTES,
     TAG_BYTES,
@@ -44,9 +46,14 @@ LAYOUT: tuple[tuple[int, int, str, str], ...] = (
     (12, 8, "float64", "timestamp"),
     (20, 16, "bytes", "session"),
     (36, 64, "float32[8][2]", "markers"),
-    (100, 16, "bytes", "tag"),
 )
-"""(offset, size, type, field) of every field, as the README documents them."""
+"""(offset, size, type, field) of every field a packet always has."""
+OPTIONAL_LAYOUT: tuple[tuple[str, str, str, str], ...] = (
+    ("100", "1", "uint8", "count"),
+    ("101", "8n", "float32[n][2]", "blobs"),
+    ("100 + b", "16", "bytes", "tag"),
+)
+"""(offset, size, type, field) of the fields flags announce, as the README writes them."""
 
 
 def sample(**changes: object) -> MarkerPacket:
@@ -79,7 +86,7 @@ def test_layout_sizes_and_offsets() -> None:
     plain, signed = encode(packet), encode(packet, KEY)
     assert (HEADER_BYTES, BODY_BYTES, TAG_BYTES) == (36, 100, 16)
     assert (len(plain), len(signed)) == (100, 116)
-    assert sum(size for _, size, _, _ in LAYOUT) == len(signed)
+    assert sum(size for _, size, _, _ in LAYOUT) == len(plain)
     assert all(o + s == LAYOUT[i + 1][0] for i, (o, s, _, _) in enumerate(LAYOUT[:-1]))
     assert signed[:BODY_BYTES] == plain[:5] + b"\x01" + plain[6:]
     assert plain[0:4] == b"SMBA"
@@ -95,13 +102,47 @@ def test_layout_sizes_and_offsets() -> None:
 
 def test_docstring_table_matches_layout() -> None:
     rows = re.findall(
-        r"^\| (\d+) \| (\d+) \| ([\w\[\]]+) \| (\w+) \|", service.packet.__doc__, re.M
+        r"^\| ([\d +b]+) \| (\d+n?) \| ([\w\[\]]+) \| (\w+) \|", service.packet.__doc__, re.M
     )
-    assert tuple((int(o), int(s), t, f) for o, s, t, f in rows) == LAYOUT
+    always = tuple((int(o), int(s), t, f) for o, s, t, f in rows[: len(LAYOUT)])
+    assert always == LAYOUT
+    assert tuple(rows[len(LAYOUT) :]) == OPTIONAL_LAYOUT
 
 
 def test_max_packet_bytes_leaves_room() -> None:
-    assert BODY_BYTES + TAG_BYTES <= MAX_PACKET_BYTES
+    assert BODY_BYTES + 1 + 8 * MAX_BLOBS + TAG_BYTES <= MAX_PACKET_BYTES
+
+
+def test_unlabelled_blobs_follow_the_markers_under_the_tag() -> None:
+    blobs = np.array([[12.25, 40.5], [100.125, 3.75], [0.0, 119.0]], dtype=np.float32)
+    packet = sample(blobs=blobs)
+    plain, signed = encode(packet), encode(packet, KEY)
+    assert (len(plain), len(signed)) == (100 + 1 + 24, 100 + 1 + 24 + 16)
+    assert (plain[5], signed[5]) == (FLAG_BLOBS, FLAG_BLOBS | 1)
+    assert plain[100] == 3
+    assert np.array_equal(np.frombuffer(plain[101:], "<f4").reshape(3, 2), blobs)
+    assert signed[125:] == hmac.new(KEY, signed[:125], hashlib.sha256).digest()[:16]
+    assert decode(plain) == packet and decode(signed, KEY) == packet
+    assert decode(plain) != sample()
+    assert reason_of(plain[:-1]) == "too short" and reason_of(plain + b"\0") == "bad length"
+    assert reason_of(plain[:100] + b"\x00" + plain[101:]) == "bad values"
+    assert reason_of(plain[:100] + bytes([MAX_BLOBS + 1]) + plain[101:]) == "bad values"
+    assert reason_of(plain[:100]) == "too short"
+    assert reason_of(signed[:100] + b"\x02" + signed[101:], KEY) == "bad length"
+    nan = plain[:101] + np.full(6, np.nan, "<f4").tobytes()
+    assert reason_of(nan) == "bad values"
+    pose = encode(PosePacket(0, 0, 0.0, np.zeros((13, 3))))
+    assert reason_of(pose[:5] + bytes([FLAG_POSE | FLAG_BLOBS]) + pose[6:]) == (
+        "unsupported version"
+    )
+
+
+@pytest.mark.parametrize(
+    "blobs", [np.zeros((MAX_BLOBS + 1, 2)), np.zeros((2, 3)), np.array([[1.0, np.inf]])]
+)
+def test_bad_blobs_rejected(blobs: np.ndarray) -> None:
+    with pytest.raises(ValueError, match="blob"):
+        sample(blobs=blobs)
 
 
 # --- round trips -------------------------------------------------------------------------
@@ -208,7 +249,7 @@ def test_header_reasons() -> None:
     assert reason_of(b"\0" * 100) == "bad magic"
     assert reason_of(plain[:4] + b"\x02" + plain[5:]) == "unsupported version"
     assert reason_of(plain[:4] + b"\x00" + plain[5:]) == "unsupported version"
-    assert reason_of(plain[:5] + b"\x04" + plain[6:]) == "unsupported version"
+    assert reason_of(plain[:5] + b"\x08" + plain[6:]) == "unsupported version"
     assert reason_of(plain[:5] + b"\x80" + plain[6:]) == "unsupported version"
 
 
@@ -278,6 +319,10 @@ packets = st.builds(
     timestamp=st.floats(allow_nan=False, allow_infinity=False),
     markers=st.lists(markers_rows, min_size=8, max_size=8).map(np.array),
     session=st.from_regex(r"[A-Za-z0-9._-]{0,16}", fullmatch=True),
+    blobs=st.lists(
+        st.tuples(*[st.floats(allow_nan=False, allow_infinity=False, width=32)] * 2),
+        max_size=MAX_BLOBS,
+    ).map(lambda rows: np.array(rows, dtype=np.float32).reshape(-1, 2)),
 )
 datagrams = st.one_of(
     st.binary(max_size=MAX_PACKET_BYTES + 8),
@@ -308,7 +353,7 @@ def test_fuzz_round_trip(packet: MarkerPacket, key: bytes | None) -> None:
     assert check_decode(encode(packet, key), key) == packet
 
 
-@given(packet=packets, key=keys, position=st.integers(0, 115), flip=st.integers(1, 255))
+@given(packet=packets, key=keys, position=st.integers(0, 260), flip=st.integers(1, 255))
 def test_fuzz_single_byte_mutation(
     packet: MarkerPacket, key: bytes | None, position: int, flip: int
 ) -> None:
@@ -317,9 +362,11 @@ def test_fuzz_single_byte_mutation(
     data[position] ^= flip
     mutated = bytes(data)
     result = check_decode(mutated, key)
-    if position < 6 or key is not None:
-        assert result is None  # header damage or a signed packet: always dropped
-        if key is not None and position >= 6:
+    # magic, version, flags and the blob count say how long the packet is
+    structural = position < 6 or (len(packet.blobs) > 0 and position == BODY_BYTES)
+    if structural or key is not None:
+        assert result is None  # length damage or a signed packet: always dropped
+        if key is not None and not structural:
             assert reason_of(mutated, key) == "bad tag"
     elif position < 12:  # camera, sequence: every value is valid
         assert result is not None

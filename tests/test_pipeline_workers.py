@@ -15,6 +15,7 @@ from live_fixtures import config
 
 from samba.errors import InputError
 from service.errors import ServiceError
+from service.frame_pipeline import CameraMarkers
 from service.pipeline_workers import FrameDone, InlinePipelines, WorkerPipelines
 from service.synthetic_capture import SyntheticCapture
 
@@ -40,7 +41,7 @@ class Collected:
 
 def submit_all(pipelines: InlinePipelines | WorkerPipelines, capture: SyntheticCapture) -> None:
     for frame in range(capture.frames):
-        pixels = capture.pixels[:, frame]
+        pixels = CameraMarkers.from_labels(capture.pixels[:, frame])
         pipelines.submit("stage", frame, pixels, frame / 60.0, time.time())
 
 
@@ -96,7 +97,9 @@ def test_a_worker_that_dies_is_replaced_and_its_session_goes_on(
     try:
         pool.open(config(live_calibration, live_store), 0.0)
         first = pool.worker_pids()
-        pool.submit("stage", 0, live_capture.pixels[:, 0], 0.0, time.time())
+        pool.submit(
+            "stage", 0, CameraMarkers.from_labels(live_capture.pixels[:, 0]), 0.0, time.time()
+        )
         os.kill(first[0], signal.SIGKILL)
         deadline = time.time() + 60
         while pool.restarts == 0:

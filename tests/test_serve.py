@@ -226,3 +226,6 @@ def test_sessions_from_a_config_file(
     path.write_text('[[session]]\nname = "a"\ncalibration = "c"\ndatabase = "d"\nfsp = 3\n')
     with pytest.raises(Exception, match="unknown key 'fsp'"):
         read_sessions(path)
+    path.write_text('[[session]]\nname = "a"\ncalibration = "c"\ndatabase = "d"\nlabels = "me"\n')
+    with pytest.raises(Exception, match=r"serve.toml: session 'a': labels must be one of"):
+        read_sessions(path)

@@ -1,0 +1,161 @@
+"""Keeping the 8 marker labels in every camera of a capture stage at once.
+
+`StageTracker` steps one `samba.marker_tracking.MarkerTracker` per camera on that
+camera's blobs and then, unless cross-view labelling is off, the
+`samba.cross_view_labels.CrossViewLabeller`, handing the labels it finds back to the
+trackers. The offline camera chain (`samba.camera_chain`) and the live server's
+labelling (`service.frame_pipeline`) both run it once per frame.
+
+It starts either from the standard pose where the subject stands (`from_standard_pose`),
+or from labels a camera node already put on the blobs (`from_labels`: the nodes started
+from that pose themselves); then the cross-view labeller starts at the first frame whose
+8 markers all triangulate. A camera whose frame is missing (None; e.g. its packet was
+lost) skips that frame: its tracker is not stepped and its labels are missing.
+
+Labels the camera nodes already put on blobs (`known`) stand: each camera's tracker is
+put on them (`MarkerTracker.reacquire`) before the cross-view labelling, which then only
+adds the labels the nodes lost (and drops a label whose views disagree). A node that
+follows every frame keeps the labels through frames the server never gets, and the
+server keeps finding the ones it lost.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from samba.camera import CameraGroup
+from samba.cross_view_labels import CrossViewLabeller, CrossViewSettings
+from samba.errors import InputError
+from samba.marker_tracking import MarkerTracker, TrackerSettings
+from samba.skeleton import N_MARKERS, markers_of, standing_pose
+from samba.triangulation import Triangulation
+
+
+class StageTracker:
+    """The 8 labels in every camera of `cameras`, from each frame's blobs.
+
+    `trackers` one `MarkerTracker` per camera; `initial` (8, 3) meters where the markers
+    are when capture starts, or None to start the cross-view labelling at the first
+    frame whose markers all triangulate; `cross_view` its settings (None: each camera's
+    tracker alone). Call `step` once per frame, in order.
+    """
+
+    def __init__(
+        self,
+        cameras: CameraGroup,
+        trackers: Sequence[MarkerTracker],
+        initial: np.ndarray | None = None,
+        cross_view: CrossViewSettings | None = None,
+    ) -> None:
+        if len(trackers) != len(cameras):
+            raise InputError(
+                "trackers", f"need one per camera ({len(cameras)}), got {len(trackers)}"
+            )
+        self.cameras = cameras
+        self.trackers = list(trackers)
+        self._cross_view = cross_view
+        self._labeller = (
+            CrossViewLabeller(cameras, initial, cross_view)
+            if cross_view is not None and initial is not None
+            else None
+        )
+
+    @classmethod
+    def from_standard_pose(
+        cls,
+        cameras: CameraGroup,
+        position: Sequence[float] = (0.0, 0.0),
+        heading_deg: float = 0.0,
+        height: float = 1.70,
+        tracker: Mapping[str, float] | None = None,
+        cross_view: CrossViewSettings | None = None,
+    ) -> StageTracker:
+        """Every camera's labels started from the standard pose of an average body of
+        `height` m standing at `position` (x, z) meters, facing +Z turned by
+        `heading_deg` about +Y; `tracker` overrides of the tracker settings in reference
+        pixels (`TrackerSettings.for_camera`)."""
+        where = (position, heading_deg, height)
+        trackers = [
+            MarkerTracker.from_standard_pose(
+                camera, *where, TrackerSettings.for_camera(camera, **(tracker or {}))
+            )
+            for camera in cameras
+        ]
+        return cls(cameras, trackers, markers_of(standing_pose(*where)), cross_view)
+
+    @classmethod
+    def from_labels(
+        cls,
+        cameras: CameraGroup,
+        labels: np.ndarray,
+        tracker: Mapping[str, float] | None = None,
+        cross_view: CrossViewSettings | None = None,
+    ) -> StageTracker:
+        """Every camera's labels started where `labels` (c, 8, 2) raw pixels put them
+        (NaN: not known, the label starts abandoned); the cross-view labelling starts at
+        the first frame whose 8 markers all triangulate."""
+        labels = np.asarray(labels, dtype=np.float64)
+        if labels.shape != (len(cameras), N_MARKERS, 2):
+            raise InputError(
+                "labels", f"must be ({len(cameras)}, {N_MARKERS}, 2) pixels, got {labels.shape}"
+            )
+        trackers = [
+            MarkerTracker(start, TrackerSettings.for_camera(camera, **(tracker or {})))
+            for camera, start in zip(cameras, labels, strict=True)
+        ]
+        return cls(cameras, trackers, None, cross_view)
+
+    def step(
+        self, centroids: Sequence[np.ndarray | None], known: np.ndarray | None = None
+    ) -> np.ndarray:
+        """The labels (c, 8, 2) raw pixels of this frame, NaN = missing, from each
+        camera's blob centroids (m, 2) raw pixels (None: no frame from that camera) and
+        the labels `known` (c, 8, 2) already (NaN: not known), each one of the blobs."""
+        if len(centroids) != len(self.cameras):
+            raise InputError(
+                "centroids",
+                f"need one blob array (or None) per camera ({len(self.cameras)}), "
+                f"got {len(centroids)}",
+            )
+        labelled = np.full((len(self.cameras), N_MARKERS, 2), np.nan)
+        unlabelled = []
+        for camera, (tracker, blobs) in enumerate(zip(self.trackers, centroids, strict=True)):
+            if blobs is None:
+                unlabelled.append(np.zeros((0, 2)))
+                continue
+            labelled[camera] = tracker.step(blobs)
+            if known is not None:
+                labelled[camera] = _put_on(tracker, labelled[camera], known[camera])
+            unlabelled.append(tracker.anonymous_blobs)
+        if self._cross_view is None:
+            return labelled
+        if self._labeller is None:
+            points = Triangulation.from_views(
+                self.cameras.projections, self.cameras.undistort(labelled)
+            ).points
+            if np.isnan(points).any():
+                return labelled
+            self._labeller = CrossViewLabeller(self.cameras, points, self._cross_view)
+        labelled, found = self._labeller.step(labelled, unlabelled)
+        for event in found:
+            self.trackers[event.camera].reacquire(event.label, event.pixel)
+        return labelled
+
+
+def _put_on(tracker: MarkerTracker, labels: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """`labels` (8, 2) pixels of `tracker`'s last frame with the `known` ones (8, 2, NaN:
+    not known) put in their place, in the tracker too; a label of the tracker's on a blob
+    a known label took is dropped from the output."""
+    given = ~np.isnan(known).any(axis=-1)
+    if not given.any():
+        return labels
+    differs = given & ~(np.abs(labels - known) <= 1e-6).all(axis=-1)
+    for label in np.flatnonzero(differs):
+        tracker.reacquire(int(label), known[label])
+    out = np.where(given[:, None], known, labels)
+    taken = (np.abs(out[:, None] - known[None]) <= 1e-6).all(axis=-1)  # (8, 8)
+    np.fill_diagonal(taken, False)
+    out[~given & taken.any(axis=-1)] = np.nan
+    return out

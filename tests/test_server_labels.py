@@ -1,0 +1,125 @@
+"""The live server finds the marker labels camera nodes lost (`labels = "server"`).
+
+Three rendered synthetic camera nodes (`CameraNode`: detection and tracking, as `samba
+node` runs them) film a held-out kick; their packets' contents, labelled markers and
+unlabelled blobs (`CameraMarkers`), go through the session's `FramePipeline` once with
+the server's labelling and once with the nodes' labels as they are.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from live_fixtures import config
+
+from samba.calibration_file import write_calibration
+from samba.camera import CameraGroup
+from samba.lead_in import standing_lead_in
+from samba.observation import spread_cameras
+from samba.skeleton import N_MARKERS, markers_of
+from samba.stage_tracking import StageTracker
+from samba.synthetic import generate
+from samba.synthetic_cameras import with_size
+from service.frame_pipeline import CameraMarkers, FramePipeline
+from service.node import CameraNode, SubjectStart, SyntheticFeed
+
+FPS = 30.0
+
+
+class Filmed:
+    """What the nodes sent: `frames` (one `CameraMarkers` per frame), `truth` (F, 8, 3)
+    m, and the calibration file of the `cameras`."""
+
+    def __init__(self, tmp_path: Path) -> None:
+        poses = generate("kick", seconds=4, fps=FPS, seed=5).poses
+        lead_in = standing_lead_in(poses, FPS)
+        self.cameras = CameraGroup(
+            tuple(with_size(c, (320, 240)) for c in spread_cameras(poses, 3))
+        )
+        self.calibration = tmp_path / "stage.toml"
+        write_calibration(self.calibration, self.cameras)
+        self.truth = markers_of(lead_in.poses)
+        labels = np.full((len(self.cameras), len(lead_in.poses), N_MARKERS, 2), np.nan)
+        blobs: list[list[np.ndarray]] = []
+        for i, camera in enumerate(self.cameras):
+            feed = SyntheticFeed(camera, i, lead_in, FPS, seed=3, start_at=0.0, pace=False)
+            node = CameraNode(camera, SubjectStart.of(lead_in), feed.mask)
+            blobs.append([])
+            for f, capture in enumerate(feed.captures()):
+                labels[i, f] = node.process(capture.frame)
+                blobs[i].append(node.unlabelled())
+        self.frames = [
+            CameraMarkers(labels[:, f], tuple(b[f] for b in blobs))
+            for f in range(len(lead_in.poses))
+        ]
+
+
+@pytest.fixture(scope="module")
+def filmed(tmp_path_factory: pytest.TempPathFactory) -> Filmed:
+    return Filmed(tmp_path_factory.mktemp("server-labels"))
+
+
+def triangulated(
+    filmed: Filmed, store: Path, labels: str, frames: list[CameraMarkers]
+) -> np.ndarray:
+    """The markers (F, 8, 3) m the session's pipeline triangulates from `frames`."""
+    pipeline = FramePipeline(config(filmed.calibration, store, labels=labels), 0.0)
+    try:
+        return np.stack([pipeline.process(frame, 0.0, 0.0).markers for frame in frames])
+    finally:
+        pipeline.close()
+
+
+def without_packets(frames: list[CameraMarkers], rate: float, seed: int) -> list[CameraMarkers]:
+    """The frames with each camera's packet lost at `rate`, never all of a frame's."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for frame in frames:
+        lost = rng.random(len(frame.blobs)) < rate
+        lost[rng.integers(len(lost))] = False
+        labels = np.where(lost[:, None, None], np.nan, frame.labels)
+        out.append(
+            CameraMarkers(
+                labels, tuple(None if x else b for x, b in zip(lost, frame.blobs, strict=True))
+            )
+        )
+    return out
+
+
+@pytest.mark.parametrize("loss", [0.0, 0.1])
+def test_the_server_finds_labels_the_nodes_lost_without_swapping(
+    filmed: Filmed, live_store: Path, loss: float
+) -> None:
+    frames = without_packets(filmed.frames, loss, seed=2) if loss else filmed.frames
+    server = triangulated(filmed, live_store, "server", frames)
+    nodes = triangulated(filmed, live_store, "nodes", frames)
+    missing = {
+        name: np.isnan(m[..., 0]).mean() for name, m in (("server", server), ("nodes", nodes))
+    }
+    assert missing["server"] < 0.75 * missing["nodes"], missing
+    error = np.linalg.norm(server - filmed.truth, axis=-1)
+    found = ~np.isnan(error)
+    assert error[found].max() < 0.03  # meters: no marker under another's label
+    assert np.sqrt(np.mean(error[found] ** 2)) < 0.015
+
+
+def test_the_server_labels_by_default_with_three_cameras_or_more(
+    filmed: Filmed, live_store: Path, live_calibration: Path
+) -> None:
+    for calibration, expected in ((filmed.calibration, True), (live_calibration, False)):
+        pipeline = FramePipeline(config(calibration, live_store, labels="auto"), 0.0)
+        pipeline.close()
+        assert pipeline.server_labels is expected
+
+
+def test_the_nodes_labels_stand_and_a_lost_frame_is_skipped(filmed: Filmed) -> None:
+    frames = filmed.frames[:40]
+    stage = StageTracker.from_labels(filmed.cameras, frames[0].labels)
+    for frame in frames:
+        out = stage.step(frame.centroids(), known=frame.labels)
+        given = ~np.isnan(frame.labels)
+        np.testing.assert_array_equal(out[given], frame.labels[given])
+    gap = stage.step([None, *frames[-1].centroids()[1:]], known=frames[-1].labels)
+    assert np.isnan(gap[0]).all() and not np.isnan(gap[1:]).all()
