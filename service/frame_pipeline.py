@@ -1,10 +1,10 @@
 """`FramePipeline`: what a capture session computes for each frame.
 
-From the marker pixels of a frame's cameras (`CameraMarkers`): label them on the server
-(`samba.stage_tracking`, unless the session keeps the nodes' labels), undistort them,
-triangulate the 8 markers
-(DLT with outlier gating), reconstruct the 13 joints with the session's pose database
-and method (`samba.reconstruction.Reconstructor.step`, the same code as the offline
+From the marker pixels of a frame's cameras (`CameraMarkers`): find the labels the nodes
+lost (`samba.stage_tracking`, unless the session keeps the nodes' labels), undistort
+the labels, triangulate the 8 markers (DLT with outlier gating), reconstruct the 13
+joints with the session's pose database and method
+(`samba.reconstruction.Reconstructor.step`, the same code as the offline
 reconstruction), retarget them to the avatar (`export.live_retarget`) and hand the VMC
 bundles to the network. It holds all of a session's CPU work and none of its
 bookkeeping, so a server can run it beside its event loop in a worker process
