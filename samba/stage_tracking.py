@@ -30,7 +30,7 @@ from samba.cross_view_labels import CrossViewLabeller, CrossViewSettings
 from samba.errors import InputError
 from samba.marker_tracking import MarkerTracker, TrackerSettings
 from samba.skeleton import N_MARKERS, markers_of, standing_pose
-from samba.triangulation import Triangulation
+from samba.triangulation import triangulate_cameras
 
 
 class StageTracker:
@@ -132,9 +132,7 @@ class StageTracker:
         if self._cross_view is None:
             return labelled
         if self._labeller is None:
-            points = Triangulation.from_views(
-                self.cameras.projections, self.cameras.undistort(labelled)
-            ).points
+            points = triangulate_cameras(list(self.cameras), labelled)
             if np.isnan(points).any():
                 return labelled
             self._labeller = CrossViewLabeller(self.cameras, points, self._cross_view)
