@@ -12,6 +12,14 @@ re-ranks them by true distance, and accepts the top k once the k-th true distanc
 more than the largest projected distance fetched; otherwise it fetches more. Results
 are therefore exact, equal to brute force.
 
+In 14 dimensions a tree over a few ten thousand poses is too shallow to split most axes,
+so an exact search visits most of its leaves. Up to `scan_limit` poses (`SCAN_LIMIT`,
+the crossover `bench/bench_db.py` measures), exact queries scan the features instead;
+approximate ones still use the tree, which is then faster. A scan ranks every pose by
+|f|^2 - 2 f.q in float32 (one matrix product per chunk of queries), re-ranks the best
+`EXACT_FETCH` * k by true distance, and scans a row again in full precision when its
+k-th distance is not clear, by the float32 error bound, of the best pose left out.
+
 An observation with missing markers is compared with features of the database poses
 computed by the same alignment with the same markers masked, so that the origin and
 heading agree; a tree for each such mask is built on first use and kept (the 8 masks of
@@ -25,6 +33,7 @@ import tempfile
 import zipfile
 from collections import OrderedDict
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +56,13 @@ EXACT_FETCH = 2
 """Exact queries first fetch this many times k candidates (more when not certified)."""
 APPROXIMATE_FETCH = 4
 """Approximate queries fetch this many times k candidates and re-rank them."""
+SCAN_LIMIT = 50_000
+"""Largest table an exact query scans rather than searching the tree. bench_db, single
+queries at 10^4-3x10^4 poses: the scan is 1.2-1.8x faster at p50 and 3.5x at p99; on
+takes the database does not hold (bench_reconstruction) 4x faster; at 10^5 the tree
+wins."""
+SCAN_CHUNK = 64
+"""Queries scanned per matrix product (bounds the (chunk, n) distance block)."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +73,15 @@ class _Tree:
     mean: np.ndarray  # (3 * present,)
     basis: np.ndarray  # (3 * present, dims), orthonormal columns
     tree: cKDTree
+
+    @cached_property
+    def _scanned(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """What scans read, made on the first: the features transposed and scaled by -2
+        (D, n) float32 (a contiguous copy, which the matrix product reads twice as fast),
+        their squared norms (n,) float32 and the largest of those."""
+        norms = np.einsum("nd,nd->n", self.features, self.features, dtype=np.float64)
+        scaled = np.ascontiguousarray(-2.0 * self.features.T, dtype=np.float32)
+        return scaled, norms.astype(np.float32), float(norms.max())
 
     @classmethod
     def build(cls, features: np.ndarray, dims: int) -> _Tree:
@@ -73,15 +98,18 @@ class _Tree:
         )
         return cls(features, mean, basis, tree)
 
-    def query(self, f: np.ndarray, k: int, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    def query(self, f: np.ndarray, k: int, eps: float, scan: bool) -> tuple[np.ndarray, np.ndarray]:
         """k nearest of features f (b, D): distances (b, k), indices (b, k).
 
-        With eps == 0 the result is exact (fetching more candidates until certified);
-        with eps > 0 the tree search is approximate and one batch of candidates is used.
+        `scan` searches by scanning every feature (exact); otherwise the tree: with
+        eps == 0 the result is exact (fetching more candidates until certified), with
+        eps > 0 the tree search is approximate and one batch of candidates is used.
         """
+        if scan:
+            return self._scan(f, k)
         n = len(self.features)
         z = (f - self.mean) @ self.basis
-        f32 = f.astype(np.float32)[:, None, :]
+        f32 = f.astype(np.float32)
         fetch = min((EXACT_FETCH if eps == 0 else APPROXIMATE_FETCH) * k, n)
         dist, idx, bound = self._rerank(z, f32, k, fetch, eps)
         unsure = np.flatnonzero(dist[:, -1] > bound) if eps == 0 else ()
@@ -104,14 +132,48 @@ class _Tree:
         bound, cand = self.tree.query(
             z, k=[fetch] if fetch == 1 else fetch, eps=eps, workers=workers
         )
-        diff = self.features[cand] - f32
+        return (*self._nearest_of(cand, f32, k), bound[:, -1])
+
+    def _nearest_of(self, cand: np.ndarray, q: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The k of candidate rows `cand` (b, m) truly nearest to features q (b, D)
+        float32: (distances (b, k) float64, indices (b, k)), nearest first."""
+        diff = self.features[cand] - q[:, None]
         true = np.sqrt(np.einsum("bkd,bkd->bk", diff, diff, dtype=np.float64))
-        rows = np.arange(len(z))[:, None]
-        if fetch > 256:
+        rows = np.arange(len(q))[:, None]
+        if cand.shape[1] > 256:
             part = np.argpartition(true, k - 1, axis=1)[:, :k]
             true, cand = true[rows, part], cand[rows, part]
         order = np.argsort(true, axis=1, kind="stable")[:, :k]
-        return true[rows, order], cand[rows, order], bound[:, -1]
+        return true[rows, order], cand[rows, order]
+
+    def _scan(self, f: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The exact k nearest of features f (b, D) by scanning all features, chunk by
+        chunk: (distances (b, k), indices (b, k))."""
+        n, width = self.features.shape
+        scaled, norms, big = self._scanned
+        fetch = min(EXACT_FETCH * k, n)
+        # The ranking's float32 rounding is at most (width + 2) units in the last place of
+        # |f|^2 + 2 |f| |q| <= 2 (|f|^2 + |q|^2), |f|^2 <= big: a pose left out ranks no
+        # better than the fetch-th candidate, so a k-th distance clear of that by twice
+        # the bound is exact.
+        rounding = 4.0 * (width + 2) * float(np.finfo(np.float32).eps)
+        f32 = f.astype(np.float32)
+        dist, idx = [], []
+        for start in range(0, len(f), SCAN_CHUNK):
+            q = f32[start : start + SCAN_CHUNK]
+            ranked = q @ scaled
+            ranked += norms  # (c, n): |f - q|^2 - |q|^2
+            cand = np.argpartition(ranked, fetch - 1, axis=1)[:, :fetch]
+            d, i = self._nearest_of(cand, q, k)
+            if fetch < n:
+                q2 = np.einsum("bd,bd->b", q, q, dtype=np.float64)
+                left_out = ranked[np.arange(len(q)), cand[:, -1]] + q2 * (1.0 - rounding)
+                for r in np.flatnonzero(d[:, -1] ** 2 > left_out - rounding * big):
+                    every = np.arange(n)[None]
+                    d[r], i[r] = (a[0] for a in self._nearest_of(every, q[r : r + 1], k))
+            dist.append(d)
+            idx.append(i)
+        return np.concatenate(dist), np.concatenate(idx)
 
 
 class PoseIndex:
@@ -119,6 +181,8 @@ class PoseIndex:
 
     Build with `build(poses)`, persist with `save(path)` / `load(path, poses)`. `poses`
     (n, 13, 3) stays referenced (it may be a memory map) for trees of masked markers.
+    `scan_limit`: exact queries of tables of at most this many poses scan them instead of
+    searching the tree (`SCAN_LIMIT`; 0 always uses the tree).
     """
 
     def __init__(
@@ -130,6 +194,7 @@ class PoseIndex:
         self.scale_by_tibia = scale_by_tibia
         self._full = full
         self._masked: OrderedDict[int, _Tree] = OrderedDict()
+        self.scan_limit = SCAN_LIMIT
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -183,7 +248,8 @@ class PoseIndex:
         present = ~np.isnan(markers).any(axis=-1)
         aligned, _ = align_markers(markers, scale_by_tibia=self.scale_by_tibia)
         if present.all():
-            dist, idx = self._full.query(aligned.reshape(len(markers), -1), k, eps)
+            f = aligned.reshape(len(markers), -1)
+            dist, idx = self._full.query(f, k, eps, self._scans(eps))
             return (dist[0], idx[0]) if single else (dist, idx)
         if not present.any(axis=1).all():
             raise QueryError("markers", "an observation has no marker present")
@@ -195,8 +261,12 @@ class PoseIndex:
             keep = present[rows[0]]
             f = aligned[rows][:, keep].reshape(len(rows), -1)
             tree = self._tree(int(mask), keep)
-            dist[rows], idx[rows] = tree.query(f, k, eps)
+            dist[rows], idx[rows] = tree.query(f, k, eps, self._scans(eps))
         return (dist[0], idx[0]) if single else (dist, idx)
+
+    def _scans(self, eps: float) -> bool:
+        """Whether queries with this eps scan the table rather than search the tree."""
+        return eps == 0 and len(self) <= self.scan_limit
 
     def _tree(self, mask: int, keep: np.ndarray) -> _Tree:
         """The tree for a marker mask: the full one, or a cached masked one (LRU)."""

@@ -1,4 +1,5 @@
-"""Latency percentiles over the recent frames of a capture session."""
+"""A capture session's running figures: latency percentiles over its recent frames and
+how its markers were labelled."""
 
 from __future__ import annotations
 
@@ -47,3 +48,33 @@ class LatencyWindow:
             value = float(np.percentile(values, p)) if len(values) else None
             out[f"p{p:g}_ms"] = None if value is None else round(value, 3)
         return out
+
+
+class LabelCounts:
+    """How a marker session's markers were labelled, counted over its frames out, one
+    count per marker of every camera that sent the frame: `from_nodes` the labels the
+    nodes sent, `found_by_server` the ones the nodes had lost that the server's labelling
+    found again (`labels` "server"), `missing` the ones still missing after labelling."""
+
+    def __init__(self) -> None:
+        self.from_nodes = 0
+        self.found_by_server = 0
+        self.missing = 0
+
+    def add(self, sent: np.ndarray, labelled: np.ndarray) -> None:
+        """Count one frame: the labels `sent` (c, 8, 2) pixels, NaN = lost, by the c
+        cameras whose packets came, and the same cameras' `labelled` (c, 8, 2) ones that
+        were triangulated."""
+        node = ~np.isnan(sent).any(axis=-1)
+        out = ~np.isnan(labelled).any(axis=-1)
+        self.from_nodes += int(node.sum())
+        self.found_by_server += int((out & ~node).sum())
+        self.missing += int((~out).sum())
+
+    def summary(self) -> dict[str, int]:
+        """The three counts by name."""
+        return {
+            "from_nodes": self.from_nodes,
+            "found_by_server": self.found_by_server,
+            "missing": self.missing,
+        }

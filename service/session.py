@@ -32,7 +32,7 @@ from samba.skeleton import N_MARKERS
 from service.errors import ServiceError
 from service.frame_pipeline import CameraMarkers, FrameInput, FrameOutput
 from service.frame_sync import FrameSync, SyncedFrame
-from service.metrics import LatencyWindow
+from service.metrics import LabelCounts, LatencyWindow
 from service.packet import Packet, PosePacket
 from service.session_config import SessionConfig
 from service.take_recorder import TakeRecorder
@@ -112,6 +112,7 @@ class CaptureSession:
             min_cameras=min(config.min_cameras, count),
         )
         self.latency = LatencyWindow()
+        self.labels = LabelCounts()
         self.frames_out = 0
         self.frames_failed = 0
         self.predicted_frames = 0
@@ -173,12 +174,16 @@ class CaptureSession:
         self.frames_out += 1
         self.predicted_frames += estimate.predicted
         self.vmc_errors = output.vmc_errors
+        cameras = list(frame.packets)
+        if not self.poses:
+            sent = np.stack([frame.packets[c].markers for c in cameras])
+            self.labels.add(sent, output.labels[cameras])
         if self._recorder is not None:
             self._recorder.write_frame(
                 max(0, round(frame.time * 1e9)),
                 estimate,
                 markers,
-                {str(c): output.labels[c] for c in frame.packets} if not self.poses else {},
+                {str(c): output.labels[c] for c in cameras} if not self.poses else {},
             )
         if self._viewer is not None and self._viewer.clients(self.name):
             self._viewer.publish(
@@ -279,7 +284,8 @@ class CaptureSession:
         }
 
     def metrics(self) -> dict[str, Any]:
-        """A JSON-ready snapshot of the session's counters and latency percentiles."""
+        """A JSON-ready snapshot of the session's counters (`labels`: `LabelCounts`, None
+        for a poses session) and latency percentiles."""
         counts = self.sync.counts
         return {
             "frames_out": self.frames_out,
@@ -287,6 +293,7 @@ class CaptureSession:
             "frames_failed": self.frames_failed,
             "frames_in_flight": len(self._in_flight),
             "sync": dict(vars(counts)),
+            "labels": None if self.poses else self.labels.summary(),
             "latency": self.latency.summary(),
             "vmc_send_errors": self.vmc_errors,
             "uptime_s": round(time.time() - self.started, 3),

@@ -1,5 +1,6 @@
 """The k-d tree index returns exactly the brute-force nearest poses, with and without
-missing markers, and survives a save/load round trip."""
+missing markers, through the tree and through the scan of small tables, and survives a
+save/load round trip."""
 
 from __future__ import annotations
 
@@ -69,9 +70,22 @@ def poses() -> np.ndarray:
     return _database(20_000)
 
 
-@pytest.fixture(scope="module")
-def index(poses: np.ndarray) -> PoseIndex:
-    return PoseIndex.build(poses, generation="g1")
+def _tree_index(poses: np.ndarray) -> PoseIndex:
+    """An index that searches its tree whatever the table's size."""
+    index = PoseIndex.build(poses, generation="g1")
+    index.scan_limit = 0
+    return index
+
+
+@pytest.fixture(scope="module", params=["tree", "scan"])
+def index(poses: np.ndarray, request: pytest.FixtureRequest) -> PoseIndex:
+    """The same table searched through the tree and by the scan (20,000 poses: scanned
+    by default)."""
+    if request.param == "tree":
+        return _tree_index(poses)
+    index = PoseIndex.build(poses, generation="g1")
+    assert len(index) <= index.scan_limit
+    return index
 
 
 def test_complete_queries_equal_brute_force(poses, index) -> None:
@@ -130,12 +144,28 @@ def test_tibia_scaled_index_finds_a_smaller_body_in_the_same_pose(poses) -> None
     assert (unscaled[:, 0] != np.arange(30)).any()
 
 
-def test_approximate_search_has_high_recall(poses, index) -> None:
+def test_approximate_search_has_high_recall(poses) -> None:
+    index = _tree_index(poses)
     markers = _observations(poses, 200, seed=3)
     _, exact = index.query(markers, k=10)
     _, approx = index.query(markers, k=10, eps=APPROXIMATE_EPS)
     recall = np.mean([len(set(a) & set(e)) / 10 for a, e in zip(approx, exact, strict=True)])
     assert recall >= 0.97
+
+
+def test_scan_is_exact_among_poses_at_equal_distance() -> None:
+    """Forty copies of one pose fill the scan's candidates with ties its float32 ranking
+    cannot order; it must fall back to full precision and still agree with brute force."""
+    others = _database(3_000, seed=7)
+    poses = np.concatenate([others, np.repeat(others[:1], 40, axis=0), others[1:2] + 1e-6])
+    index = PoseIndex.build(poses)
+    markers = markers_of(others[0].astype(np.float64)) + 0.003
+    dist, idx = index.query(markers[None], k=10)
+    _assert_same(poses, markers[None], dist, idx, 10)
+    for scanned in (index, _tree_index(poses)):
+        d, _ = scanned.query(markers[None], k=45)
+        d_ref, _ = brute_force(poses, markers, 45)
+        np.testing.assert_allclose(d[0], d_ref, atol=2e-6)
 
 
 def test_save_and_load_round_trip_without_pickle(poses, index, tmp_path: Path) -> None:
@@ -174,9 +204,9 @@ def test_bad_queries_raise_query_errors(index) -> None:
 
 def test_real_data_queries_equal_brute_force(cmu_files: list[Path]) -> None:
     poses = np.concatenate([load_bvh_take(f).poses for f in cmu_files[::4]])
-    index = PoseIndex.build(poses)
     held_out = load_bvh_take(cmu_files[1]).poses[::25].astype(np.float64)
     markers = markers_of(held_out)
     markers[::3, 3] = np.nan
-    dist, idx = index.query(markers, k=10)
-    _assert_same(poses, markers, dist, idx, 10)
+    for index in (PoseIndex.build(poses), _tree_index(poses)):
+        dist, idx = index.query(markers, k=10)
+        _assert_same(poses, markers, dist, idx, 10)

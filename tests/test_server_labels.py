@@ -3,7 +3,8 @@
 Three rendered synthetic camera nodes (`CameraNode`: detection and tracking, as `samba
 node` runs them) film a held-out kick; their packets' contents, labelled markers and
 unlabelled blobs (`CameraMarkers`), go through the session's `FramePipeline` once with
-the server's labelling and once with the nodes' labels as they are.
+the server's labelling and once with the nodes' labels as they are; as packets, through
+a `CaptureSession`, whose metrics count the labels the server found.
 """
 
 from __future__ import annotations
@@ -24,6 +25,9 @@ from samba.synthetic import generate
 from samba.synthetic_cameras import with_size
 from service.frame_pipeline import CameraMarkers, FramePipeline
 from service.node import CameraNode, SubjectStart, SyntheticFeed
+from service.packet import MarkerPacket
+from service.pipeline_workers import FrameDone, InlinePipelines
+from service.session import CaptureSession
 
 FPS = 30.0
 
@@ -123,3 +127,32 @@ def test_the_nodes_labels_stand_and_a_lost_frame_is_skipped(filmed: Filmed) -> N
         np.testing.assert_array_equal(out[given], frame.labels[given])
     gap = stage.step([None, *frames[-1].centroids()[1:]], known=frames[-1].labels)
     assert np.isnan(gap[0]).all() and not np.isnan(gap[1:]).all()
+
+
+def test_the_session_metrics_count_the_labels_the_server_found(
+    filmed: Filmed, live_store: Path, tmp_path: Path
+) -> None:
+    labelled: list[np.ndarray] = []
+
+    def deliver(done: FrameDone) -> None:
+        assert done.output is not None, done.error
+        labelled.append(done.output.labels)
+        session.complete(done.sequence, done.output)
+
+    cfg = config(filmed.calibration, live_store, labels="server", fps=FPS)
+    session = CaptureSession(cfg, tmp_path, InlinePipelines(deliver))
+    for f, frame in enumerate(filmed.frames):
+        for camera, (markers, blobs) in enumerate(zip(frame.labels, frame.blobs, strict=True)):
+            packet = MarkerPacket(camera, f, f / FPS, markers, "stage", blobs[:16])
+            session.on_packet(packet, f / FPS + 0.002)
+    session.close()
+    counts = session.metrics()["labels"]
+    sent = ~np.isnan(np.stack([frame.labels for frame in filmed.frames])).any(axis=-1)
+    out = ~np.isnan(np.stack(labelled)).any(axis=-1)
+    assert len(labelled) == session.frames_out == len(filmed.frames)
+    assert counts == {
+        "from_nodes": sent.sum(),
+        "found_by_server": (out & ~sent).sum(),
+        "missing": (~out).sum(),
+    }
+    assert counts["found_by_server"] > 0.2 * (~sent).sum()
