@@ -56,11 +56,11 @@ EXACT_FETCH = 2
 """Exact queries first fetch this many times k candidates (more when not certified)."""
 APPROXIMATE_FETCH = 4
 """Approximate queries fetch this many times k candidates and re-rank them."""
-SCAN_LIMIT = 50_000
+SCAN_LIMIT = 100_000
 """Largest table an exact query scans rather than searching the tree. bench_db, single
-queries at 10^4-3x10^4 poses: the scan is 1.2-1.8x faster at p50 and 3.5x at p99; on
-takes the database does not hold (bench_reconstruction) 4x faster; at 10^5 the tree
-wins."""
+queries at 10^4 to 10^5 poses: the scan's p50 is 1.3-2x and its p99 2-9x lower than the
+exact tree search's; on takes the database does not hold (bench_reconstruction) its p50
+is 4x lower. bench_db times the scan up to 2 x 10^5 poses."""
 SCAN_CHUNK = 64
 """Queries scanned per matrix product (bounds the (chunk, n) distance block)."""
 

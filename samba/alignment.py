@@ -25,6 +25,8 @@ from samba.skeleton import N_MARKERS
 
 HEADING_PAIRS: tuple[tuple[int, int], ...] = ((0, 1), (4, 5), (6, 7), (2, 3))
 """(left, right) marker pairs tried in order for the heading: shoulders, knees, feet, wrists."""
+_LEFT = [pair[0] for pair in HEADING_PAIRS]
+_RIGHT = [pair[1] for pair in HEADING_PAIRS]
 TIBIA_PAIRS: tuple[tuple[int, int], ...] = ((4, 6), (5, 7))
 """(knee, foot) marker index pairs whose lengths give the tibia."""
 REFERENCE_TIBIA = 0.45
@@ -89,6 +91,12 @@ class Alignment:
         return self._turn(points, -1.0) + self.origin[:, None, :]
 
 
+def has_heading(present: np.ndarray) -> np.ndarray:
+    """Whether each marker set, given which of its markers are present (n, 8) bool, has a
+    complete pair of `HEADING_PAIRS` to set its heading: (n,) bool."""
+    return (present[:, _LEFT] & present[:, _RIGHT]).any(axis=1)
+
+
 def align_markers(
     markers: np.ndarray, scale_by_tibia: bool = False
 ) -> tuple[np.ndarray, Alignment]:
@@ -108,12 +116,10 @@ def _partial_origin_and_yaw(
     filled = np.where(present[..., None], markers, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         origin = filled.sum(axis=1) / count[:, None]
-    left = [pair[0] for pair in HEADING_PAIRS]
-    right = [pair[1] for pair in HEADING_PAIRS]
-    complete = present[:, left] & present[:, right]  # (n, pairs)
+    complete = present[:, _LEFT] & present[:, _RIGHT]  # (n, pairs)
     first = np.argmax(complete, axis=1)
     rows = np.arange(len(markers))
-    line = filled[rows, np.take(left, first)] - filled[rows, np.take(right, first)]
+    line = filled[rows, np.take(_LEFT, first)] - filled[rows, np.take(_RIGHT, first)]
     yaw = np.where(complete[rows, first], np.arctan2(line[:, 2], line[:, 0]), 0.0)
     return origin, yaw
 

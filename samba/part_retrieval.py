@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from samba.alignment import HEADING_PAIRS, Alignment
+from samba.alignment import Alignment, has_heading
 from samba.skeleton import N_JOINTS, N_MARKERS, markers_of
 
 if TYPE_CHECKING:
@@ -65,10 +65,7 @@ def refine_with_parts(
         keep[list(part.markers)] = True
         masked = np.where(keep[:, None], markers, np.nan)
         present = ~np.isnan(masked).any(axis=-1)
-        ok = np.zeros(len(markers), dtype=bool)
-        for left, right in HEADING_PAIRS:
-            ok |= present[:, left] & present[:, right]
-        ok &= present.sum(axis=1) >= 3
+        ok = has_heading(present) & (present.sum(axis=1) >= 3)
         if not ok.any():
             continue
         estimate = part_estimate(source, masked[ok], k, eps)

@@ -27,7 +27,7 @@ from typing import Protocol
 
 import numpy as np
 
-from samba.alignment import HEADING_PAIRS, Alignment
+from samba.alignment import Alignment, has_heading
 from samba.local_space import (
     POSE_DIMS,
     EnergyTerms,
@@ -224,10 +224,8 @@ class Reconstructor:
             poses[frames] = refine_with_parts(
                 self.source, filled, poses[frames], self.config.part_k, self.config.eps
             )
-        diff = markers_of(poses) - markers
-        squared = np.where(
-            present, np.einsum("fmc,fmc->fm", np.nan_to_num(diff), np.nan_to_num(diff)), 0.0
-        )
+        diff = np.where(present[..., None], markers_of(poses) - markers, 0.0)
+        squared = np.einsum("fmc,fmc->fm", diff, diff)
         used = np.where(usable, present.sum(axis=1), 0)
         residual = np.sqrt(squared.sum(axis=1) / np.maximum(used, 1)) * usable
         confident = usable & (used >= 6) & (residual <= self.config.confident_residual)
@@ -235,10 +233,7 @@ class Reconstructor:
 
     def usable(self, present: np.ndarray) -> np.ndarray:
         """(F,) frames with enough markers present (F, 8) to be reconstructed."""
-        pair = np.zeros(len(present), dtype=bool)
-        for left, right in HEADING_PAIRS:
-            pair |= present[:, left] & present[:, right]
-        return pair & (present.sum(axis=1) >= self.config.min_markers)
+        return has_heading(present) & (present.sum(axis=1) >= self.config.min_markers)
 
     def neighbours(self, markers: np.ndarray) -> tuple[Alignment, np.ndarray, np.ndarray]:
         """The retrieval step for usable frames' markers (b, 8, 3): the observations'
