@@ -44,14 +44,16 @@ class ChainSettings:
     """How `run_chain` films and measures: the rig's `render` options, tracker settings
     `tracker` in reference pixels (scaled per camera by `TrackerSettings.for_camera`),
     the standing lead-in: `hold_seconds` in the standard pose, then `blend_seconds`
-    moving into the take's first pose; and the cross-view labelling of lost labels
-    (`cross_view`; None: each camera's tracker alone)."""
+    moving into the take's first pose; the cross-view labelling of lost labels
+    (`cross_view`; None: each camera's tracker alone), and whether a stage that lost the
+    subject looks for it in the standard pose (`search`, `StageTracker`)."""
 
     render: RenderOptions = field(default_factory=RenderOptions)
     tracker: dict[str, float] = field(default_factory=dict)
     hold_seconds: float = 0.5
     blend_seconds: float = 0.5
     cross_view: CrossViewSettings | None = field(default_factory=CrossViewSettings)
+    search: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,7 +144,7 @@ def track_cameras(
     (`centroids[camera][frame]`, (m, 2) each). Each tracker starts from the standard
     pose where the lead-in stands; with `settings.cross_view`, lost labels are found
     again across the cameras every frame (`CrossViewLabeller`) and handed back to the
-    trackers."""
+    trackers, and with `settings.search` a lost subject is found again (`StageTracker`)."""
     stage = StageTracker.from_standard_pose(
         cameras,
         lead_in.position,
@@ -150,6 +152,7 @@ def track_cameras(
         lead_in.height,
         settings.tracker,
         settings.cross_view,
+        settings.search,
     )
     frames = len(centroids[0])
     out = np.full((len(cameras), frames, N_MARKERS, 2), np.nan)

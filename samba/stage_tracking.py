@@ -17,6 +17,15 @@ put on them (`MarkerTracker.reacquire`) before the cross-view labelling, which t
 adds the labels the nodes lost (and drops a label whose views disagree). A node that
 follows every frame keeps the labels through frames the server never gets, and the
 server keeps finding the ones it lost.
+
+With three cameras or more, a stage that has lost the subject (fewer than
+`MIN_TRIANGULATED` markers triangulate: it left, or every view was blocked) looks for it
+again in every frame's blobs: standing in the standard pose anywhere on the stage,
+facing the front as at the start (`samba.standard_pose_search`; the front is the start's
+heading, or with `from_labels` the heading of the first frame whose markers all
+triangulated). When found, every camera's tracker and the cross-view labelling start
+again from there. With two cameras, points of blobs paired the wrong way make that
+search unsafe, and it is off.
 """
 
 from __future__ import annotations
@@ -30,7 +39,14 @@ from samba.cross_view_labels import CrossViewLabeller, CrossViewSettings
 from samba.errors import InputError
 from samba.marker_tracking import MarkerTracker, TrackerSettings
 from samba.skeleton import N_MARKERS, markers_of, standing_pose
+from samba.standard_pose_search import SHOULDERS, StandardPoseSearch, heading_of
 from samba.triangulation import triangulate_cameras
+
+MIN_TRIANGULATED = 3
+"""Fewer markers triangulated than this (the fewest a reconstruction uses) and the stage
+has lost the subject: it searches for the standard pose."""
+MIN_SEARCH_CAMERAS = 3
+"""Cameras the search for the standard pose needs (see the module docstring)."""
 
 
 class StageTracker:
@@ -39,7 +55,9 @@ class StageTracker:
     `trackers` one `MarkerTracker` per camera; `initial` (8, 3) meters where the markers
     are when capture starts, or None to start the cross-view labelling at the first
     frame whose markers all triangulate; `cross_view` its settings (None: each camera's
-    tracker alone). Call `step` once per frame, in order.
+    tracker alone); `search` whether a stage of three cameras or more that lost the
+    subject looks for it in the standard pose (with the cross-view labelling only).
+    Call `step` once per frame, in order.
     """
 
     def __init__(
@@ -48,6 +66,7 @@ class StageTracker:
         trackers: Sequence[MarkerTracker],
         initial: np.ndarray | None = None,
         cross_view: CrossViewSettings | None = None,
+        search: bool = True,
     ) -> None:
         if len(trackers) != len(cameras):
             raise InputError(
@@ -56,11 +75,13 @@ class StageTracker:
         self.cameras = cameras
         self.trackers = list(trackers)
         self._cross_view = cross_view
-        self._labeller = (
-            CrossViewLabeller(cameras, initial, cross_view)
-            if cross_view is not None and initial is not None
-            else None
-        )
+        self._labeller = None
+        self._searches = search and len(cameras) >= MIN_SEARCH_CAMERAS
+        self._search: StandardPoseSearch | None = None
+        self.searches = 0
+        """How often the subject was found again in the standard pose."""
+        if cross_view is not None and initial is not None:
+            self._start_labeller(initial)
 
     @classmethod
     def from_standard_pose(
@@ -71,11 +92,13 @@ class StageTracker:
         height: float = 1.70,
         tracker: Mapping[str, float] | None = None,
         cross_view: CrossViewSettings | None = None,
+        search: bool = True,
     ) -> StageTracker:
         """Every camera's labels started from the standard pose of an average body of
         `height` m standing at `position` (x, z) meters, facing +Z turned by
         `heading_deg` about +Y; `tracker` overrides of the tracker settings in reference
-        pixels (`TrackerSettings.for_camera`)."""
+        pixels (`TrackerSettings.for_camera`); `cross_view` and `search` as for the
+        constructor."""
         where = (position, heading_deg, height)
         trackers = [
             MarkerTracker.from_standard_pose(
@@ -83,7 +106,7 @@ class StageTracker:
             )
             for camera in cameras
         ]
-        return cls(cameras, trackers, markers_of(standing_pose(*where)), cross_view)
+        return cls(cameras, trackers, markers_of(standing_pose(*where)), cross_view, search)
 
     @classmethod
     def from_labels(
@@ -135,11 +158,42 @@ class StageTracker:
             points = triangulate_cameras(list(self.cameras), labelled)
             if np.isnan(points).any():
                 return labelled
-            self._labeller = CrossViewLabeller(self.cameras, points, self._cross_view)
+            self._start_labeller(points)
+        assert self._labeller is not None
         labelled, found = self._labeller.step(labelled, unlabelled)
         for event in found:
             self.trackers[event.camera].reacquire(event.label, event.pixel)
+        seen = (~np.isnan(labelled).any(axis=-1)).sum(axis=0) >= 2
+        if self._search is not None and seen.sum() < MIN_TRIANGULATED:
+            return self._search_again(centroids, labelled)
         return labelled
+
+    def _start_labeller(self, points: np.ndarray) -> None:
+        """Start the cross-view labelling at markers `points` (8, 3) meters, and the
+        search for the standard pose facing as their shoulders do (3 cameras or more)."""
+        assert self._cross_view is not None
+        self._labeller = CrossViewLabeller(self.cameras, points, self._cross_view)
+        if self._searches and self._search is None:
+            heading = heading_of(points[list(SHOULDERS)])
+            self._search = StandardPoseSearch(self.cameras, heading_deg=heading)
+
+    def _search_again(
+        self, centroids: Sequence[np.ndarray | None], labelled: np.ndarray
+    ) -> np.ndarray:
+        """The labels (c, 8, 2) of the subject found in the standard pose among this
+        frame's blobs `centroids`, every tracker and the labeller started again there;
+        `labelled` as they were when it is not found."""
+        assert self._search is not None
+        found = self._search.find(centroids)
+        if found is None:
+            return labelled
+        self.trackers = [
+            MarkerTracker(start, tracker.settings)
+            for tracker, start in zip(self.trackers, found.labels, strict=True)
+        ]
+        self._labeller = CrossViewLabeller(self.cameras, found.points, self._cross_view)
+        self.searches += 1
+        return found.labels
 
 
 def _put_on(tracker: MarkerTracker, labels: np.ndarray, known: np.ndarray) -> np.ndarray:

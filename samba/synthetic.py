@@ -120,6 +120,21 @@ def random_body(rng: np.random.Generator) -> Body:
     return Body.from_height(height).scaled(factors)
 
 
+def random_standing(
+    rng: np.random.Generator, offset_m: float = 1.0, turn_deg: float = 50.0
+) -> np.ndarray:
+    """A `random_body` in the standard pose (13, 3) meters, arms 10..70 degrees from
+    vertical, standing within `offset_m` of the origin in x and z, facing +Z turned by
+    up to `turn_deg` about +Y."""
+    pose = random_body(rng).standard_pose(rng.uniform(10.0, 70.0))
+    turn = np.radians(rng.uniform(-turn_deg, turn_deg))
+    c, s = np.cos(turn), np.sin(turn)
+    x, z = pose[:, 0].copy(), pose[:, 2].copy()
+    pose[:, 0], pose[:, 2] = c * x + s * z, c * z - s * x
+    pose[:, [0, 2]] += rng.uniform(-offset_m, offset_m, 2)
+    return pose
+
+
 def _reach(body: Body, knee_deg: float | np.ndarray) -> float | np.ndarray:
     """Hip-to-ankle distance (m) of a leg whose knee is flexed by `knee_deg` degrees."""
     th, sh = body.thigh, body.shin

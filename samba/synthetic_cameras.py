@@ -1,12 +1,13 @@
-"""`with_size`: a camera's image resampled to another resolution with the same view
-(for synthetic captures at several resolutions; `samba.observation.spread_cameras`
-places the cameras)."""
+"""Synthetic cameras: `with_size`, a camera's image resampled to another resolution with
+the same view (for synthetic captures at several resolutions;
+`samba.observation.spread_cameras` places the cameras), and `detected_blobs`, what an
+ideal blob detector reports of markers without rendering them."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from samba.camera import Camera
+from samba.camera import Camera, CameraGroup
 
 
 def with_size(camera: Camera, size: tuple[int, int]) -> Camera:
@@ -26,3 +27,23 @@ def with_size(camera: Camera, size: tuple[int, int]) -> Camera:
         translation=camera.translation,
         distortion=camera.distortion,
     )
+
+
+def detected_blobs(
+    cameras: CameraGroup,
+    markers: np.ndarray,
+    rng: np.random.Generator,
+    noise_px: float = 0.3,
+    stray: int = 0,
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The markers (8, 3) m as blob centroids: their pixels (c, 8, 2) in every camera
+    with Gaussian noise of `noise_px`, and each camera's blobs (m_c, 2), the pixels
+    inside its image and `stray` bright spots anywhere in it, in random order. Markers
+    hide nothing and never merge."""
+    pixels = cameras.project(markers)
+    pixels = pixels + rng.normal(0.0, noise_px, pixels.shape)
+    blobs = []
+    for camera, uv in zip(cameras, pixels, strict=True):
+        spots = rng.uniform((0, 0), camera.size, (stray, 2))
+        blobs.append(rng.permutation(np.concatenate([uv[camera.in_image(uv)], spots])))
+    return pixels, blobs

@@ -70,14 +70,16 @@ class FrameOutput:
     """One computed frame: `labels` (c, 8, 2) the raw pixels triangulated (the server's
     labels or the nodes'; (0, 8, 2) for a pose session), `markers` (8, 3) triangulated
     meters (NaN = missing), the reconstruction `estimate`, the `latency` in seconds from
-    the frame's last packet to its VMC bundles sent, and `vmc_errors`, the VMC datagrams
-    the network refused so far in this session."""
+    the frame's last packet to its VMC bundles sent, `vmc_errors`, the VMC datagrams
+    the network refused so far in this session, and `found_again`: whether the server's
+    labelling found the subject again in this frame after losing it (`StageTracker`)."""
 
     labels: np.ndarray
     markers: np.ndarray
     estimate: PoseEstimate
     latency: float
     vmc_errors: int
+    found_again: bool = False
 
 
 class AvatarStream:
@@ -143,7 +145,9 @@ class FramePipeline:
     def process(self, frame: CameraMarkers, frame_time: float, last_arrival: float) -> FrameOutput:
         """Compute one frame from the cameras' marker pixels `frame`, captured at
         `frame_time` and complete at `last_arrival` (s)."""
+        searches = 0 if self._stage is None else self._stage.searches
         labels = self._label(frame)
+        found_again = self._stage is not None and self._stage.searches > searches
         views = Triangulation.from_views(
             self._projections,
             self.cameras.undistort(labels),
@@ -152,7 +156,8 @@ class FramePipeline:
         markers = views.points
         estimate = self.reconstructor.step(markers)
         errors = self.avatar.send(estimate.pose, frame_time)
-        return FrameOutput(labels, markers, estimate, time.time() - last_arrival, errors)
+        latency = time.time() - last_arrival
+        return FrameOutput(labels, markers, estimate, latency, errors, found_again)
 
     def _label(self, frame: CameraMarkers) -> np.ndarray:
         """The labels (c, 8, 2) to triangulate: the nodes' (without `server_labels`, and

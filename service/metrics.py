@@ -54,27 +54,32 @@ class LabelCounts:
     """How a marker session's markers were labelled, counted over its frames out, one
     count per marker of every camera that sent the frame: `from_nodes` the labels the
     nodes sent, `found_by_server` the ones the nodes had lost that the server's labelling
-    found again (`labels` "server"), `missing` the ones still missing after labelling."""
+    found again (`labels` "server"), `missing` the ones still missing after labelling;
+    and `subject_found_again`, the frames in which the server's labelling found the
+    subject again in the standard pose after losing it entirely."""
 
     def __init__(self) -> None:
         self.from_nodes = 0
         self.found_by_server = 0
         self.missing = 0
+        self.subject_found_again = 0
 
-    def add(self, sent: np.ndarray, labelled: np.ndarray) -> None:
+    def add(self, sent: np.ndarray, labelled: np.ndarray, found_again: bool = False) -> None:
         """Count one frame: the labels `sent` (c, 8, 2) pixels, NaN = lost, by the c
-        cameras whose packets came, and the same cameras' `labelled` (c, 8, 2) ones that
-        were triangulated."""
+        cameras whose packets came, the same cameras' `labelled` (c, 8, 2) ones that were
+        triangulated, and whether the subject was `found_again` in it."""
         node = ~np.isnan(sent).any(axis=-1)
         out = ~np.isnan(labelled).any(axis=-1)
         self.from_nodes += int(node.sum())
         self.found_by_server += int((out & ~node).sum())
         self.missing += int((~out).sum())
+        self.subject_found_again += int(found_again)
 
     def summary(self) -> dict[str, int]:
-        """The three counts by name."""
+        """The four counts by name."""
         return {
             "from_nodes": self.from_nodes,
             "found_by_server": self.found_by_server,
             "missing": self.missing,
+            "subject_found_again": self.subject_found_again,
         }

@@ -177,7 +177,7 @@ class CaptureSession:
         cameras = list(frame.packets)
         if not self.poses:
             sent = np.stack([frame.packets[c].markers for c in cameras])
-            self.labels.add(sent, output.labels[cameras])
+            self.labels.add(sent, output.labels[cameras], output.found_again)
         if self._recorder is not None:
             self._recorder.write_frame(
                 max(0, round(frame.time * 1e9)),
