@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
@@ -11,9 +12,16 @@ from conftest import ROOT
 
 from samba.synthetic import generate
 
-_spec = importlib.util.spec_from_file_location("bench_db", ROOT / "bench" / "bench_db.py")
-bench_db = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bench_db)
+
+def _bench(name: str) -> ModuleType:
+    """The module of `bench/<name>.py`, loaded from its file (bench/ is no package)."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "bench" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+bench_db = _bench("bench_db")
 
 
 def test_database_benchmark_prints_its_tables(
@@ -29,11 +37,7 @@ def test_database_benchmark_prints_its_tables(
     assert "baseline: cKDTree raw 24-D" in out and "index, exact" in out
 
 
-_spec_rec = importlib.util.spec_from_file_location(
-    "bench_reconstruction", ROOT / "bench" / "bench_reconstruction.py"
-)
-bench_reconstruction = importlib.util.module_from_spec(_spec_rec)
-_spec_rec.loader.exec_module(bench_reconstruction)
+bench_reconstruction = _bench("bench_reconstruction")
 
 
 def test_reconstruction_benchmark_prints_its_table(capsys: pytest.CaptureFixture[str]) -> None:
@@ -44,11 +48,7 @@ def test_reconstruction_benchmark_prints_its_table(capsys: pytest.CaptureFixture
     assert all(float(r[2]) > 0 and float(r[6]) > 0 for r in rows)
 
 
-_spec_cam = importlib.util.spec_from_file_location(
-    "bench_cameras", ROOT / "bench" / "bench_cameras.py"
-)
-bench_cameras = importlib.util.module_from_spec(_spec_cam)
-_spec_cam.loader.exec_module(bench_cameras)
+bench_cameras = _bench("bench_cameras")
 
 
 def test_camera_benchmark_prints_its_tables(capsys: pytest.CaptureFixture[str]) -> None:
@@ -59,11 +59,7 @@ def test_camera_benchmark_prints_its_tables(capsys: pytest.CaptureFixture[str]) 
     assert rows[0][:2] == ["160x120", "64"] and float(rows[0][2]) > 0
 
 
-_spec_export = importlib.util.spec_from_file_location(
-    "bench_export", ROOT / "bench" / "bench_export.py"
-)
-bench_export = importlib.util.module_from_spec(_spec_export)
-_spec_export.loader.exec_module(bench_export)
+bench_export = _bench("bench_export")
 
 
 def test_export_benchmark_prints_speed_and_round_trip_tables(
@@ -76,11 +72,7 @@ def test_export_benchmark_prints_speed_and_round_trip_tables(
     assert "Round trip of 2 BVH files" in out and "worst" in out
 
 
-_spec_service = importlib.util.spec_from_file_location(
-    "bench_service", ROOT / "bench" / "bench_service.py"
-)
-bench_service = importlib.util.module_from_spec(_spec_service)
-_spec_service.loader.exec_module(bench_service)
+bench_service = _bench("bench_service")
 
 
 def test_service_benchmark_prints_its_latency_table(capsys: pytest.CaptureFixture[str]) -> None:
@@ -92,11 +84,7 @@ def test_service_benchmark_prints_its_latency_table(capsys: pytest.CaptureFixtur
     assert all(isinstance(v, float) and v > 0 for v in row[6:11])
 
 
-_spec_silhouette = importlib.util.spec_from_file_location(
-    "bench_silhouette", ROOT / "bench" / "bench_silhouette.py"
-)
-bench_silhouette = importlib.util.module_from_spec(_spec_silhouette)
-_spec_silhouette.loader.exec_module(bench_silhouette)
+bench_silhouette = _bench("bench_silhouette")
 
 
 def test_silhouette_benchmark_prints_accuracy_figure_4_and_speed(
@@ -113,11 +101,7 @@ def test_silhouette_benchmark_prints_accuracy_figure_4_and_speed(
     assert len(tracked) == 60 * len(bench_silhouette.MOTIONS) and len(scanned) > 0
 
 
-_spec_volume = importlib.util.spec_from_file_location(
-    "bench_volume", ROOT / "bench" / "bench_volume.py"
-)
-bench_volume = importlib.util.module_from_spec(_spec_volume)
-_spec_volume.loader.exec_module(bench_volume)
+bench_volume = _bench("bench_volume")
 
 
 def test_volume_benchmark_prints_its_tables(capsys: pytest.CaptureFixture[str]) -> None:
@@ -129,11 +113,7 @@ def test_volume_benchmark_prints_its_tables(capsys: pytest.CaptureFixture[str]) 
     assert [r[0] for r in creatures] == ["quadruped-0", "chain-0"]
 
 
-_spec_chain = importlib.util.spec_from_file_location(
-    "camera_chain_report", ROOT / "bench" / "camera_chain_report.py"
-)
-camera_chain_report = importlib.util.module_from_spec(_spec_chain)
-_spec_chain.loader.exec_module(camera_chain_report)
+camera_chain_report = _bench("camera_chain_report")
 
 
 def test_leave_and_return_report_finds_the_subject_only_with_the_search(
