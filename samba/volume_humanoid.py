@@ -8,9 +8,13 @@ arms; left and right come from the subject's facing direction in the first frame
 polyline from its branch's start (the root or a branching node: the top of the trunk
 for arms and head, the crotch for legs) through the model's joints to its end (the
 tip of the hand, foot or head). A capture joint sits at a fixed fraction of that
-polyline's length (`LIMB_FRACTIONS`, the joint's place on the limb of the capsule
-body), except elbows and knees, which take the model's own joint nearest that
-fraction when one lies within `SNAP` of it.
+polyline's length (`LIMB_FRACTIONS`), except elbows and knees, which take the model's
+own joint nearest that fraction when one lies within `SNAP` of it. The hips are not on
+the legs' polylines: the legs part at the crotch, below and between the hips, so each
+hip is the crotch moved out towards its knee's side and up, by fractions of the leg's
+length (`HIP_OUT`, `HIP_UP`). The arm fractions are the joints' places on the limbs of
+the capsule body; the knee's and the hips' were fitted on takes of seeds 1-5 (seeds
+11-13 and 31-34, which `bench/bench_volume.py` reports, were not used).
 """
 
 from __future__ import annotations
@@ -24,21 +28,28 @@ from samba.skeleton import N_JOINTS
 
 LIMB_FRACTIONS: dict[str, tuple[float, ...]] = {
     "arm": (0.19, 0.51, 0.80),
-    "leg": (0.08, 0.50, 0.88),
+    "leg": (0.40, 0.88),
     "head": (0.35,),
 }
 """Fractions of a limb's length from its branch start: arm (shoulder, elbow, wrist),
-leg (hip, knee, ankle), head (the head joint)."""
+leg (knee, ankle), head (the head joint)."""
+HIP_OUT = 0.10
+"""How far a hip lies out from the crotch, towards its knee's side, as a fraction of the
+leg's length (its polyline's, crotch to toe)."""
+HIP_UP = 0.10
+"""How far the hips lie above the crotch, as a fraction of the leg's length."""
 SNAP = 0.12
 """Largest distance (fraction of the limb) from an elbow's or knee's nominal place to
 a model joint that replaces it."""
 _JOINTS = {
     ("arm", 1): (1, 3, 5),
     ("arm", -1): (2, 4, 6),
-    ("leg", 1): (7, 9, 11),
-    ("leg", -1): (8, 10, 12),
+    ("leg", 1): (9, 11),
+    ("leg", -1): (10, 12),
 }
 """(limb, side: +1 left, -1 right) -> the capture joints along it, in fraction order."""
+_HIPS = {1: 7, -1: 8}
+"""Side (+1 left, -1 right) -> the hip joint."""
 
 
 def humanoid_joints(fit: SequenceFit, facing: np.ndarray) -> np.ndarray:
@@ -76,11 +87,25 @@ def humanoid_joints(fit: SequenceFit, facing: np.ndarray) -> np.ndarray:
             fractions = LIMB_FRACTIONS[kind]
             targets = _JOINTS[(kind, int(sign))]
             inner = _model_joint_fractions(fit, branch, polyline)
+            hinge = 1 if kind == "arm" else 0  # the elbow's or knee's place in `fractions`
             for k, (joint, fraction) in enumerate(zip(targets, fractions, strict=True)):
-                snapped = k == 1 and len(inner) and np.min(np.abs(inner - fraction)) <= SNAP
+                snapped = k == hinge and len(inner) and np.min(np.abs(inner - fraction)) <= SNAP
                 place = inner[np.argmin(np.abs(inner - fraction))] if snapped else fraction
                 joints[:, joint] = _at(polyline, float(place))
+            if kind == "leg":
+                joints[:, _HIPS[int(sign)]] = _hip(polyline, joints[:, targets[0]])
     return joints
+
+
+def _hip(leg: np.ndarray, knee: np.ndarray) -> np.ndarray:
+    """(n, 3) the hip of a leg polyline (n, k, 3) from the crotch, whose knee is at
+    `knee` (n, 3): out from the crotch towards the knee's side by `HIP_OUT` of the leg's
+    length and up by `HIP_UP` of it, meters."""
+    crotch = leg[:, 0]
+    length = arc_lengths(leg)[:, -1:]
+    out = (knee - crotch) * [1.0, 0.0, 1.0]
+    out /= np.maximum(np.linalg.norm(out, axis=-1, keepdims=True), 1e-12)
+    return crotch + (HIP_OUT * out + [0.0, HIP_UP, 0.0]) * length
 
 
 def _limb(fit: SequenceFit, branch: int) -> np.ndarray:
