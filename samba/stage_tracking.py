@@ -191,7 +191,7 @@ class StageTracker:
             MarkerTracker(start, tracker.settings)
             for tracker, start in zip(self.trackers, found.labels, strict=True)
         ]
-        self._labeller = CrossViewLabeller(self.cameras, found.points, self._cross_view)
+        self._start_labeller(found.points)
         self.searches += 1
         return found.labels
 
