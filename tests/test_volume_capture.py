@@ -101,6 +101,15 @@ def test_human_wave_has_human_topology_and_maps_to_13_joints() -> None:
     assert np.nanmean(report.errors[:, [7, 8]]) < 9.0  # cm: hips placed out and up from the crotch
 
 
+def test_fast_jumping_jack_arms_stay_matched_across_frames() -> None:
+    """At 10 Hz the arms of a jumping jack move farther than 0.25 m between frames; they
+    must still be matched (not interpolated in time), so the wrists map within 8 cm
+    (25.8 cm with a 0.25 m gate)."""
+    report = human_take("jumping_jacks", seed=2, seconds=1.5)
+    assert report.capture.fit.model.branch_count == 5
+    assert np.nanmean(report.errors[:, [5, 6]]) < 8.0  # cm
+
+
 def test_exaggerated_poses_keep_bone_lengths() -> None:
     from samba.synthetic import generate
 
