@@ -12,9 +12,10 @@ polyline's length (`LIMB_FRACTIONS`), except elbows and knees, which take the mo
 own joint nearest that fraction when one lies within `SNAP` of it. The hips are not on
 the legs' polylines: the legs part at the crotch, below and between the hips, so each
 hip is the crotch moved out towards its knee's side and up, by fractions of the leg's
-length (`HIP_OUT`, `HIP_UP`). The arm fractions are the joints' places on the limbs of
-the capsule body; the knee's and the hips' were fitted on takes of seeds 1-5 (seeds
-11-13 and 31-34, which `bench/bench_volume.py` reports, were not used).
+length (`HIP_OUT`, `HIP_UP`). The shoulder's fraction is its place on the arm of the
+capsule body; the others and the hips' offsets were fitted on takes of seeds 1-5
+(seeds 11-13 and 31-34, which `bench/bench_volume.py` reports, were not used): a
+branch starts and ends where the volume's curve does, not at the capsule body's joints.
 """
 
 from __future__ import annotations
@@ -27,9 +28,9 @@ from samba.sequence_model import SequenceFit
 from samba.skeleton import N_JOINTS
 
 LIMB_FRACTIONS: dict[str, tuple[float, ...]] = {
-    "arm": (0.19, 0.51, 0.80),
-    "leg": (0.40, 0.88),
-    "head": (0.35,),
+    "arm": (0.19, 0.58, 0.84),
+    "leg": (0.40, 0.84),
+    "head": (0.45,),
 }
 """Fractions of a limb's length from its branch start: arm (shoulder, elbow, wrist),
 leg (knee, ankle), head (the head joint)."""
