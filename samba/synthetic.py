@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
+from scipy.spatial.transform import Rotation
 
 from samba.skeleton import N_JOINTS, Body
 from samba.take import Take
@@ -127,10 +128,7 @@ def random_standing(
     vertical, standing within `offset_m` of the origin in x and z, facing +Z turned by
     up to `turn_deg` about +Y."""
     pose = random_body(rng).standard_pose(rng.uniform(10.0, 70.0))
-    turn = np.radians(rng.uniform(-turn_deg, turn_deg))
-    c, s = np.cos(turn), np.sin(turn)
-    x, z = pose[:, 0].copy(), pose[:, 2].copy()
-    pose[:, 0], pose[:, 2] = c * x + s * z, c * z - s * x
+    pose = Rotation.from_euler("y", rng.uniform(-turn_deg, turn_deg), degrees=True).apply(pose)
     pose[:, [0, 2]] += rng.uniform(-offset_m, offset_m, 2)
     return pose
 
