@@ -34,8 +34,12 @@ the first after `reset`) needs a hint: it only considers poses whose front is wi
 `start_tolerance` degrees of facing the camera (the player faces the screen when the
 game starts); from then on the motion model keeps the side.
 
-The estimate is the best leaf's pose moved from the tree's home to where the
-silhouette stands on the floor. Poses are (13, 3) meters in the world frame (+Y up).
+The estimate is the posterior mean: the `posterior_size` best leaves, each moved from
+the tree's home to where the silhouette stands on the floor, averaged with their
+posterior weights raised to 1 / `mean_temperature` (one camera often leaves two leaves
+equally likely — a hand in front of the body or behind it — and their mean is nearer the
+truth than either guess; `mean_temperature` = 0 keeps only the best leaf, the paper's
+estimate). Poses are (13, 3) meters in the world frame (+Y up).
 """
 
 from __future__ import annotations
@@ -61,14 +65,17 @@ class TrackerSettings:
     of the distance (scaled with the image width for "core" and "normalised", whose
     distances are in pixels); a noisy silhouette matches no node well, so sigma grows to
     `relative_sigma` times the best distance of the level in the frame (a node 10 %
-    worse than the best then costs about 1 nat, however noisy the frame). On the upper
+    worse than the best then costs about 2 nats, however noisy the frame; a sharper
+    likelihood follows limbs better but, on badly spoilt silhouettes, can turn the
+    body's back to the camera). On the upper
     levels sigma is `upper_sigma_factor` times wider, as a node's silhouette only
     stands for its leaves'. `keep` (per level): most nodes a level passes on;
     `log_margin` (nats): how far below a level's best score a node is still passed on.
     `occlusion_factor` (m of Eq. 9) widens parts visible below `occluded_below` (a
     fraction of their area); `part_cap` (nats, per part), `velocity_gain` and
     `start_tolerance` (degrees) are described in the module docstring;
-    `posterior_size` leaves carry the posterior to the next frame.
+    `posterior_size` leaves carry the posterior to the next frame; `mean_temperature`
+    flattens their weights in the estimate (0: the best leaf alone).
     """
 
     distance: str = "normalised"
@@ -76,7 +83,7 @@ class TrackerSettings:
     occluded_below: float = 0.3
     part_sigma: tuple[float, ...] = (0.05, 0.03, 0.08, 0.08, 0.06, 0.06)
     likelihood_sigma: float = 0.01
-    relative_sigma: float = 0.3
+    relative_sigma: float = 0.25
     upper_sigma_factor: float = 4.0
     keep: tuple[int, ...] = (40, 120, 400)
     log_margin: float = 12.0
@@ -84,6 +91,7 @@ class TrackerSettings:
     velocity_gain: float = 0.5
     start_tolerance: float = 60.0
     posterior_size: int = 30
+    mean_temperature: float = 3.0
 
     def __post_init__(self) -> None:
         if self.distance not in DISTANCES:
@@ -106,6 +114,10 @@ class TrackerSettings:
             raise InputError("velocity_gain", f"must be in 0..1, got {self.velocity_gain}")
         if not (np.isfinite(self.log_margin) and self.log_margin > 0):
             raise InputError("log_margin", f"must be finite and > 0, got {self.log_margin}")
+        if not (np.isfinite(self.mean_temperature) and self.mean_temperature >= 0):
+            raise InputError(
+                "mean_temperature", f"must be finite and >= 0, got {self.mean_temperature}"
+            )
         if not (self.relative_sigma > 0 and 0 <= self.start_tolerance <= 180):
             raise InputError("relative_sigma", "must be > 0 (start_tolerance in 0..180)")
 
@@ -192,10 +204,11 @@ class SilhouetteTracker:
         leaves = self.tree.leaves
         leaf = int(nodes[0])
         self._best = [*self._best[-1:], leaf]
-        shift = placement.floor + leaves.floor_offsets[leaf] - self.tree.view.home
-        shift[1] = 0.0
+        shifts = placement.floor + leaves.floor_offsets[self._previous] - self.tree.view.home
+        shifts[:, 1] = 0.0
+        placed = leaves.poses[self._previous].astype(np.float64) + shifts[:, None]
         estimate = SilhouetteEstimate(
-            pose=leaves.poses[leaf].astype(np.float64) + shift,
+            pose=self._mean(placed, scores[:best]),
             leaf=leaf,
             distance=float(distances[0]),
             occluded=leaves.visibility[leaf] < settings.occluded_below,
@@ -204,6 +217,15 @@ class SilhouetteTracker:
         )
         self._last = estimate
         return estimate
+
+    def _mean(self, placed: np.ndarray, scores: np.ndarray) -> np.ndarray:
+        """The estimate (13, 3) m from the posterior's leaves `placed` (k, 13, 3) m, best
+        first, and their log posterior `scores` (k,)."""
+        temperature = self.settings.mean_temperature
+        if temperature == 0 or len(placed) == 1:
+            return placed[0]
+        weights = np.exp((scores - scores[0]) / temperature)
+        return np.tensordot(weights / weights.sum(), placed, axes=1)
 
     def track(self, masks: np.ndarray) -> list[SilhouetteEstimate]:
         """`step` over silhouettes (n, H, W) bool, in order."""

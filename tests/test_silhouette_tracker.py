@@ -71,6 +71,8 @@ def test_settings_reject_bad_values(field: str, value: object) -> None:
     ("field", "value"),
     [
         ("posterior_size", 0),  # crashes the second frame: max of an empty array
+        ("mean_temperature", -1.0),
+        ("mean_temperature", float("nan")),
         ("log_margin", -1.0),  # prunes every node: IndexError in step
         ("log_margin", float("nan")),
         ("upper_sigma_factor", 0.0),  # divides the upper levels' distances by zero
@@ -89,7 +91,9 @@ def test_a_sequence_of_tree_poses_is_tracked_exactly(
     truth = _facing_leaves_of_take(small_tree, sources, SQUAT_TAKE)
     assert len(truth) >= 6
     poses = small_tree.leaves.poses[truth].astype(np.float64)
-    estimates = SilhouetteTracker(small_tree).track(_render(small_tree, poses))
+    masks = _render(small_tree, poses)
+    best_leaf = TrackerSettings(mean_temperature=0.0)
+    estimates = SilhouetteTracker(small_tree, best_leaf).track(masks)
     found = np.array([e.leaf for e in estimates])
     # At the bottom of the squat two leaves 3 cm apart have almost one silhouette: the
     # motion model may keep the previous one for a frame.
@@ -97,6 +101,9 @@ def test_a_sequence_of_tree_poses_is_tracked_exactly(
     errors = np.linalg.norm(np.array([e.pose for e in estimates]) - poses, axis=-1)
     assert errors.mean(axis=1).max() * 100 < 3.5  # cm
     assert errors[found == truth].max() * 1000 < 1.0  # mm
+    # The default estimate, the posterior mean, stays as close.
+    means = np.array([e.pose for e in SilhouetteTracker(small_tree).track(masks)])
+    assert np.linalg.norm(means - poses, axis=-1).mean(axis=1).max() * 100 < 3.5  # cm
     for estimate, leaf in zip(estimates, truth, strict=True):
         if estimate.leaf != leaf:
             continue
