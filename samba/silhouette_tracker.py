@@ -222,7 +222,7 @@ class SilhouetteTracker:
         """The estimate (13, 3) m from the posterior's leaves `placed` (k, 13, 3) m, best
         first, and their log posterior `scores` (k,)."""
         temperature = self.settings.mean_temperature
-        if temperature == 0 or len(placed) == 1:
+        if temperature == 0:
             return placed[0]
         weights = np.exp((scores - scores[0]) / temperature)
         return np.tensordot(weights / weights.sum(), placed, axes=1)
