@@ -42,7 +42,7 @@ from samba.pose_selection import distinct_poses, turned
 from samba.silhouette_distance import downsampled
 from samba.silhouette_render import part_visibility, render_silhouettes
 from samba.silhouette_runs import SilhouetteRuns
-from samba.silhouette_view import SilhouetteView
+from samba.silhouette_view import Placement, SilhouetteView
 from samba.synthetic_cameras import with_size
 
 LEVEL_SIZES: tuple[tuple[int, int], ...] = ((80, 60), (160, 120), (320, 240))
@@ -123,6 +123,13 @@ class ShapeTree:
             for a in (level.poses, level.floor_offsets, level.visibility, level.parents)
         ]
         return sum(a.nbytes for a in arrays) + sum(lv.silhouettes.nbytes for lv in self.levels)
+
+    def placed(self, leaves: np.ndarray, placement: Placement) -> np.ndarray:
+        """The poses (k, 13, 3) float64 meters of `leaves` (k,) indices, moved on the floor
+        from the tree's home to where a silhouette with `placement` stands."""
+        shifts = placement.floor + self.leaves.floor_offsets[leaves] - self.view.home
+        shifts[:, 1] = 0.0
+        return self.leaves.poses[leaves].astype(np.float64) + shifts[:, None]
 
     def children(self, level: int, nodes: np.ndarray) -> np.ndarray:
         """Indices on level `level + 1` of the children of `nodes` on level `level`."""

@@ -204,11 +204,8 @@ class SilhouetteTracker:
         leaves = self.tree.leaves
         leaf = int(nodes[0])
         self._best = [*self._best[-1:], leaf]
-        shifts = placement.floor + leaves.floor_offsets[self._previous] - self.tree.view.home
-        shifts[:, 1] = 0.0
-        placed = leaves.poses[self._previous].astype(np.float64) + shifts[:, None]
         estimate = SilhouetteEstimate(
-            pose=self._mean(placed, scores[:best]),
+            pose=self._mean(self.tree.placed(self._previous, placement), scores[:best]),
             leaf=leaf,
             distance=float(distances[0]),
             occluded=leaves.visibility[leaf] < settings.occluded_below,
