@@ -47,9 +47,12 @@ from samba.skeleton import N_MARKERS, markers_of
 FORMAT = 2
 DEFAULT_DIMS = 14
 LEAF_SIZE = 32
-MAX_MASK_TREES = 40
-"""Masked trees kept (least recently used dropped): enough for every pattern of one or two
-missing markers (8 + 28), which random dropout of 10% of the markers keeps asking for."""
+MAX_MASK_TREES = 64
+"""Masked tables kept (least recently used dropped): enough for every pattern of one or two
+missing markers (8 + 28) and the masks `best`'s parts query with them (63 in all), which a
+live capture prepares (`Reconstructor.prepare`) and random dropout keeps asking for. A
+table holds about 200-300 bytes per pose (features, their scan copy, the tree once
+searched)."""
 APPROXIMATE_EPS = 0.75
 """The eps of approximate queries that keeps recall@10 >= 0.99 at 10^6 poses (bench_db)."""
 EXACT_FETCH = 2
@@ -67,12 +70,22 @@ SCAN_CHUNK = 64
 
 @dataclass(frozen=True)
 class _Tree:
-    """A reduced-space k-d tree over the features of one marker mask."""
+    """A reduced-space k-d tree over the features of one marker mask. `prebuilt` is a tree
+    built in advance (the full index's, built with it and saved with the store); without
+    one the tree is built on the first search, so tables that are only scanned (masked
+    ones of small stores) never build it."""
 
     features: np.ndarray  # (n, 3 * present) float32, aligned markers present in the mask
     mean: np.ndarray  # (3 * present,)
     basis: np.ndarray  # (3 * present, dims), orthonormal columns
-    tree: cKDTree
+    prebuilt: cKDTree | None = None
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """The k-d tree over the features projected onto `basis`."""
+        if self.prebuilt is not None:
+            return self.prebuilt
+        return _reduced_tree(self.features, self.mean, self.basis)
 
     @cached_property
     def _scanned(self) -> tuple[np.ndarray, np.ndarray, float]:
@@ -84,7 +97,9 @@ class _Tree:
         return scaled, norms.astype(np.float32), float(norms.max())
 
     @classmethod
-    def build(cls, features: np.ndarray, dims: int) -> _Tree:
+    def build(cls, features: np.ndarray, dims: int, prebuild: bool = False) -> _Tree:
+        """The table of features (n, D) projected to `dims` principal dimensions, with its
+        tree built now when `prebuild`."""
         features = np.ascontiguousarray(features, dtype=np.float32)
         mean = features.mean(axis=0, dtype=np.float64)
         centered = features - mean.astype(np.float32)
@@ -92,11 +107,9 @@ class _Tree:
         _, vectors = np.linalg.eigh(cov)
         dims = min(dims, features.shape[1])
         basis = np.ascontiguousarray(vectors[:, ::-1][:, :dims])
-        reduced = centered @ basis.astype(np.float32)
-        tree = cKDTree(
-            reduced.astype(np.float64), leafsize=LEAF_SIZE, balanced_tree=False, compact_nodes=False
+        return cls(
+            features, mean, basis, _reduced_tree(features, mean, basis) if prebuild else None
         )
-        return cls(features, mean, basis, tree)
 
     def query(self, f: np.ndarray, k: int, eps: float, scan: bool) -> tuple[np.ndarray, np.ndarray]:
         """k nearest of features f (b, D): distances (b, k), indices (b, k).
@@ -220,7 +233,8 @@ class PoseIndex:
         if len(poses) == 0:
             raise StoreError("index", "cannot index an empty pose set")
         features = marker_features(poses, np.ones(N_MARKERS, dtype=bool), scale_by_tibia)
-        return cls(poses, _Tree.build(features, dims), generation, dims, scale_by_tibia)
+        full = _Tree.build(features, dims, prebuild=True)
+        return cls(poses, full, generation, dims, scale_by_tibia)
 
     def query(
         self, markers: np.ndarray, k: int = 10, eps: float = 0.0
@@ -331,7 +345,7 @@ class PoseIndex:
                 )
                 tree = cKDTree.__new__(cKDTree)
                 tree.__setstate__(state)
-                full = _Tree(features, data["mean"], data["basis"], tree)
+                full = _Tree(features, data["mean"], data["basis"], prebuilt=tree)
                 return cls(
                     poses,
                     full,
@@ -341,6 +355,15 @@ class PoseIndex:
                 )
         except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
             return None
+
+
+def _reduced_tree(features: np.ndarray, mean: np.ndarray, basis: np.ndarray) -> cKDTree:
+    """The k-d tree over features (n, D) float32 centred on `mean` and projected onto the
+    columns of `basis` (D, dims)."""
+    reduced = (features - mean.astype(np.float32)) @ basis.astype(np.float32)
+    return cKDTree(
+        reduced.astype(np.float64), leafsize=LEAF_SIZE, balanced_tree=False, compact_nodes=False
+    )
 
 
 def _state_item(value: np.ndarray) -> object:

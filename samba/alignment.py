@@ -25,8 +25,8 @@ from samba.skeleton import N_MARKERS
 
 HEADING_PAIRS: tuple[tuple[int, int], ...] = ((0, 1), (4, 5), (6, 7), (2, 3))
 """(left, right) marker pairs tried in order for the heading: shoulders, knees, feet, wrists."""
-_LEFT = [pair[0] for pair in HEADING_PAIRS]
-_RIGHT = [pair[1] for pair in HEADING_PAIRS]
+_LEFT = np.array([pair[0] for pair in HEADING_PAIRS])
+_RIGHT = np.array([pair[1] for pair in HEADING_PAIRS])
 TIBIA_PAIRS: tuple[tuple[int, int], ...] = ((4, 6), (5, 7))
 """(knee, foot) marker index pairs whose lengths give the tibia."""
 REFERENCE_TIBIA = 0.45
@@ -50,13 +50,12 @@ class Alignment:
     def from_markers(cls, markers: np.ndarray, scale_by_tibia: bool = False) -> Alignment:
         """The alignment of marker sets (n, 8, 3) in meters, NaN for missing markers."""
         markers = _as_batch(markers)
-        present = ~np.isnan(markers).any(axis=-1)
-        if present.all():
-            origin = markers.mean(axis=1)
+        if np.isnan(markers).any():
+            origin, yaw = _partial_origin_and_yaw(markers, ~np.isnan(markers).any(axis=-1))
+        else:
+            origin = np.add.reduce(markers, axis=1) * (1.0 / N_MARKERS)
             line = markers[:, 0] - markers[:, 1]
             yaw = np.arctan2(line[:, 2], line[:, 0])
-        else:
-            origin, yaw = _partial_origin_and_yaw(markers, present)
         scale = np.ones(len(markers))
         if scale_by_tibia:
             lengths = np.stack(
@@ -73,22 +72,26 @@ class Alignment:
     def __len__(self) -> int:
         return len(self.yaw)
 
-    def _turn(self, points: np.ndarray, sign: float) -> np.ndarray:
-        """Rotate points (n, m, 3) about +Y by sign * yaw."""
-        c = np.cos(self.yaw)[:, None]
-        s = sign * np.sin(self.yaw)[:, None]
-        x, y, z = points[..., 0], points[..., 1], points[..., 2]
-        return np.stack([c * x + s * z, y, c * z - s * x], axis=-1)
+    def _turn(self, factor: np.ndarray, transpose: bool) -> np.ndarray:
+        """(n, 3, 3) matrices M with points @ M = factor * R_y(yaw) points, for rows of
+        points (n, m, 3); `transpose` gives R_y(-yaw) instead."""
+        c, s = np.cos(self.yaw) * factor, np.sin(self.yaw) * factor
+        turn = np.zeros((len(self.yaw), 3, 3))
+        turn[:, 0, 0] = turn[:, 2, 2] = c
+        turn[:, 1, 1] = factor
+        turn[:, 2 if transpose else 0, 0 if transpose else 2] = -s
+        turn[:, 0 if transpose else 2, 2 if transpose else 0] = s
+        return turn
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """World points (n, m, 3) to the canonical frame (n, m, 3); NaN stays NaN."""
         moved = np.asarray(points, dtype=np.float64) - self.origin[:, None, :]
-        return self.scale[:, None, None] * self._turn(moved, 1.0)
+        return np.matmul(moved, self._turn(self.scale, transpose=False))
 
     def invert(self, points: np.ndarray) -> np.ndarray:
         """Canonical points (n, m, 3) back to the world frame (n, m, 3)."""
-        points = np.asarray(points, dtype=np.float64) / self.scale[:, None, None]
-        return self._turn(points, -1.0) + self.origin[:, None, :]
+        turned = np.matmul(points, self._turn(1.0 / self.scale, transpose=True))
+        return turned + self.origin[:, None, :]
 
 
 def has_heading(present: np.ndarray) -> np.ndarray:
@@ -112,15 +115,16 @@ def _partial_origin_and_yaw(
     markers: np.ndarray, present: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Centroid of the present markers (n, 3) and yaw (n,) from the first complete pair."""
-    count = present.sum(axis=1)
+    count = np.add.reduce(present, axis=1)
     filled = np.where(present[..., None], markers, 0.0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        origin = filled.sum(axis=1) / count[:, None]
+    origin = np.add.reduce(filled, axis=1) / np.maximum(count, 1)[:, None]
+    origin[count == 0] = np.nan
     complete = present[:, _LEFT] & present[:, _RIGHT]  # (n, pairs)
-    first = np.argmax(complete, axis=1)
+    first = complete.argmax(axis=1)
     rows = np.arange(len(markers))
-    line = filled[rows, np.take(_LEFT, first)] - filled[rows, np.take(_RIGHT, first)]
-    yaw = np.where(complete[rows, first], np.arctan2(line[:, 2], line[:, 0]), 0.0)
+    line = filled[rows, _LEFT[first]] - filled[rows, _RIGHT[first]]
+    yaw = np.arctan2(line[:, 2], line[:, 0])
+    yaw[~complete[rows, first]] = 0.0
     return origin, yaw
 
 

@@ -29,6 +29,7 @@ of the frames processed before it and costs no random draws per frame.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -156,8 +157,15 @@ def pseudo_poses(poses: np.ndarray, noise: AngleNoise) -> np.ndarray:
     r = np.hypot(lx, ly)
     straight = r < 1e-9
     safe_r = np.where(straight, 1.0, r)
-    numbers = np.stack(
-        [
+    # One matrix product per (neighbour, chain) over the whole batch, whose coefficients
+    # (K, 5, 2N, 21) every frame shares: lift the numbers against the local axes into
+    # (K, 5, 21, B * 3) and multiply. Both factors are filled column by column (np.stack
+    # and np.moveaxis cost more than the arithmetic at live-path sizes).
+    batch = poses.shape[:-3]
+    size = math.prod(batch)
+    numbers = np.empty((k, 5, N_LIMB_NUMBERS, size))  # (K, 5, 7, B)
+    for column, value in enumerate(
+        (
             lx,
             ly,
             lz,
@@ -165,16 +173,12 @@ def pseudo_poses(poses: np.ndarray, noise: AngleNoise) -> np.ndarray:
             np.where(straight, -lz, -ly * lz / safe_r),
             np.where(straight, ly, r),
             length,
-        ],
-        axis=-1,
-    )  # (..., K, 5, 7)
-    # One matrix product per (neighbour, chain) over the whole batch, whose coefficients
-    # (K, 5, 2N, 21) every frame shares: lift the numbers against the local axes into
-    # (K, 5, 21, B * 3) and multiply.
-    batch = poses.shape[:-3]
-    size = int(np.prod(batch))
-    numbers = np.moveaxis(numbers.reshape(size, k, 5, N_LIMB_NUMBERS), 0, -1)  # (K, 5, 7, B)
-    axes = np.moveaxis(np.stack([x, y, z], axis=-2).reshape(size, k, 5, 3, 3), 0, -2)
+        )
+    ):
+        numbers[:, :, column] = value.reshape(size, k, 5).transpose(1, 2, 0)
+    axes = np.empty((k, 5, 3, size, 3))  # (K, 5, axis, B, 3)
+    for row, axis in enumerate((x, y, z)):
+        axes[:, :, row] = axis.reshape(size, k, 5, 3).transpose(1, 2, 0, 3)
     lifted = numbers[:, :, :, None, :, None] * axes[:, :, None]  # (K, 5, 7, 3, B, 3)
     offsets = np.matmul(noise.coefficients, lifted.reshape(k, 5, -1, size * 3))
     offsets = offsets.reshape(k, 5, n, 2, size, 3)

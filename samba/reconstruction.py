@@ -22,6 +22,7 @@ it is flagged as predicted and not confident. No input produces a NaN pose.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, replace
 from typing import Protocol
 
@@ -168,14 +169,29 @@ class Reconstructor:
             self.config.k, self.config.n, self.config.noise_deg, self.config.seed
         )
         self._history: list[np.ndarray] = []
-        self._warm_up()
+        self.prepare(1)
 
-    def _warm_up(self) -> None:
-        """Query once with every marker mask the parts use, so that an index building
-        masked trees lazily does it now rather than in the first live frames."""
+    def prepare(self, most_missing: int = 1) -> int:
+        """Query the standard pose once with every set of 1 to `most_missing` markers
+        missing that keeps a left/right pair (and, with parts, each part's markers of
+        it), so that an index making masked tables lazily makes them now rather than in
+        the first frames of a live capture that lose those markers: such a frame would
+        stall by the table's build (30-45 ms at 10^4 poses, seconds at 10^6). The
+        constructor prepares single missing markers. Returns the observations queried."""
+        sets = [
+            missing
+            for count in range(1, most_missing + 1)
+            for missing in itertools.combinations(range(N_MARKERS), count)
+        ]
+        markers = np.repeat(markers_of(standard_pose())[None], len(sets) + 1, axis=0)
+        for row, missing in enumerate(sets, start=1):
+            markers[row, list(missing)] = np.nan
+        markers = markers[self.usable(~np.isnan(markers).any(axis=-1))]
+        self.source.query(markers[1:], k=1, eps=self.config.eps)
         if self.config.part_k:
-            markers = markers_of(standard_pose())[None]
-            refine_with_parts(self.source, markers, standard_pose()[None], 1, self.config.eps)
+            poses = np.repeat(standard_pose()[None], len(markers), axis=0)
+            refine_with_parts(self.source, markers, poses, 1, self.config.eps)
+        return len(markers) - 1
 
     def reset(self) -> None:
         """Forget the previous estimates."""

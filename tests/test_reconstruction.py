@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import db.index
 from db.index import PoseIndex
 from samba.methods import method
 from samba.reconstruction import Reconstruction, Reconstructor
@@ -166,6 +167,38 @@ def test_live_path_equals_batch_path(reconstructors: dict[str, Reconstructor], n
     assert [e.markers_used for e in live] == batch.markers_used.tolist()
     assert [e.confident for e in live] == batch.confident.tolist()
     assert [e.predicted for e in live] == batch.predicted.tolist()
+
+
+@pytest.mark.parametrize("name", ["samba", "best"])
+def test_prepared_index_builds_nothing_when_markers_are_lost(
+    database: np.ndarray, name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A live capture whose markers get occluded must not stall a frame building the
+    index's table for the new marker mask: construction prepares every single missing
+    marker, `prepare(2)` every pair (with `best`'s part masks of them)."""
+    chosen = method(name)
+    poses = (
+        np.concatenate([database, mirror_poses(database)]) if chosen.mirrored_database else database
+    )
+    r = chosen.build(PoseIndex.build(poses))
+    assert r.prepare(2) == 36
+    built: list[int] = []
+    real = db.index.marker_features
+    monkeypatch.setattr(
+        db.index, "marker_features", lambda *a, **k: built.append(1) or real(*a, **k)
+    )
+    _, markers = _observe("walk", seed=502)
+    lost = np.random.default_rng(1).random(markers.shape[:2]) < 0.1
+    lost[np.cumsum(lost, axis=1) > 2] = False  # at most two markers lost per frame
+    markers[lost] = np.nan
+    assert (lost.sum(axis=1) == 2).any()
+    r.reset()
+    result = r.reconstruct(markers)
+    assert not built
+    assert np.isfinite(result.poses).all()
+    r.reset()
+    r.step(np.where(np.arange(8)[:, None] < 3, np.nan, markers[0]))  # three lost: built now
+    assert built
 
 
 def test_accuracy_best_beats_samba_beats_nn(reconstructors: dict[str, Reconstructor]) -> None:
