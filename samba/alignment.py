@@ -83,6 +83,12 @@ class Alignment:
         turn[:, 0 if transpose else 2, 2 if transpose else 0] = s
         return turn
 
+    @property
+    def rotation(self) -> np.ndarray:
+        """(n, 3, 3) the turn R_y(yaw) as matrices acting on column vectors: canonical
+        points are scale * rotation @ (world point - origin)."""
+        return self._turn(np.ones(len(self.yaw)), transpose=True)
+
     def apply(self, points: np.ndarray) -> np.ndarray:
         """World points (n, m, 3) to the canonical frame (n, m, 3); NaN stays NaN."""
         moved = np.asarray(points, dtype=np.float64) - self.origin[:, None, :]

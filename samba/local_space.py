@@ -127,7 +127,8 @@ class EnergyTerms:
     def observed(self) -> np.ndarray:
         """(b, 39) the observed markers at their coordinates, 0.0 elsewhere."""
         x = np.zeros((len(self.markers), POSE_DIMS))
-        x[:, MARKER_COORDS] = np.nan_to_num(self.markers.reshape(len(self.markers), -1))
+        flat = self.markers.reshape(len(self.markers), -1)
+        x[:, MARKER_COORDS] = np.where(np.isnan(flat), 0.0, flat)
         return x
 
     def betas(self) -> np.ndarray:
@@ -154,7 +155,8 @@ def affine_solution(space: LocalPoseSpace, terms: EnergyTerms) -> tuple[np.ndarr
     system = cov * (terms.alpha * mask + beta)[:, None, :]
     diag = np.arange(POSE_DIMS)
     system[:, diag, diag] += 1.0
-    offset_rhs = space.mean + terms.alpha * np.einsum("bij,bj->bi", cov, mask * terms.observed())
+    observed = np.matmul(cov, (mask * terms.observed())[:, :, None])[:, :, 0]
+    offset_rhs = space.mean + terms.alpha * observed
     rhs = np.concatenate([offset_rhs[:, :, None], cov * beta[:, None, :]], axis=2)
     x = np.linalg.solve(system, rhs)
     return x[:, :, 0], x[:, :, 1:]

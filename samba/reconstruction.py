@@ -307,12 +307,15 @@ class Reconstructor:
             cfg.beta_missing,
         )
         offset, gain = affine_solution(space, terms)
-        # To world: q_w = o + R^T q_c / s with q_c = offset + gain @ (s R (t_w - o)).
-        rot = _yaw_blocks(alignment.yaw)
-        offset_w = np.einsum("bed,be->bd", rot, offset) / alignment.scale[:, None]
-        gain_w = np.matmul(np.matmul(rot.transpose(0, 2, 1), gain), rot)
-        anchor = np.tile(alignment.origin, N_JOINTS)
-        return _Solved(offset_w + anchor, gain_w, anchor)
+        # To world: q_w = o + R^T q_c / s with q_c = offset + gain @ (s R (t_w - o)), so
+        # the world gain is R^T gain R: per joint, R^T on its rows and R on its columns.
+        b = len(markers)
+        r = alignment.rotation[:, None]  # (b, 1, 3, 3)
+        gain_w = np.matmul(r.swapaxes(-1, -2), gain.reshape(b, N_JOINTS, 3, POSE_DIMS))
+        gain_w = np.matmul(gain_w.reshape(b, POSE_DIMS, N_JOINTS, 3), r)
+        offset_w = alignment.invert(offset.reshape(b, N_JOINTS, 3)).reshape(b, POSE_DIMS)
+        anchor = np.broadcast_to(alignment.origin[:, None], (b, N_JOINTS, 3)).reshape(b, POSE_DIMS)
+        return _Solved(offset_w, gain_w.reshape(b, POSE_DIMS, POSE_DIMS), anchor)
 
     def _apply(self, solved: _Solved, i: int) -> np.ndarray:
         """Frame i's pose (39,), world, given the history."""
@@ -367,17 +370,3 @@ class NearestPose(Reconstructor):
         alignment, _, neighbours = self.neighbours(markers)
         world = alignment.invert(neighbours[:, 0]).reshape(len(markers), POSE_DIMS)
         return _Solved(world, np.zeros((len(markers), POSE_DIMS, POSE_DIMS)), world)
-
-
-def _yaw_blocks(yaw: np.ndarray) -> np.ndarray:
-    """Block-diagonal (b, 39, 39) matrices applying the canonical turn R_y(yaw) to each of
-    the 13 joints of a 39-vector (the rotation part of `Alignment.apply`)."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    block = np.zeros((len(yaw), 3, 3))
-    block[:, 0, 0] = c
-    block[:, 0, 2] = s
-    block[:, 1, 1] = 1.0
-    block[:, 2, 0] = -s
-    block[:, 2, 2] = c
-    out = np.einsum("jk,bxy->bjxky", np.eye(N_JOINTS), block)
-    return out.reshape(len(yaw), POSE_DIMS, POSE_DIMS)

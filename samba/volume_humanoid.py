@@ -12,10 +12,14 @@ polyline's length (`LIMB_FRACTIONS`), except elbows and knees, which take the mo
 own joint nearest that fraction when one lies within `SNAP` of it. The hips are not on
 the legs' polylines: the legs part at the crotch, below and between the hips, so each
 hip is the crotch moved out towards its knee's side and up, by fractions of the leg's
-length (`HIP_OUT`, `HIP_UP`). The shoulder's fraction is its place on the arm of the
-capsule body; the others and the hips' offsets were fitted on takes of seeds 1-5
-(seeds 11-13 and 31-34, which `bench/bench_volume.py` reports, were not used): a
-branch starts and ends where the volume's curve does, not at the capsule body's joints.
+length (`HIP_OUT`, `HIP_UP`). With the feet together the legs carve one column and
+their branches part far below the hips; a leg carved much shorter than its length then
+reaches up from the toe along the volume's curve through the crotch to that length,
+and its knee and hip are placed on that reach (`_full_leg`). The shoulder's fraction is
+its place on the arm of the capsule body; the others, the hips' offsets and the leg's
+reach (`LEG_STATURE`, `MERGED_LEG`) were fitted on takes of seeds 1-5 (seeds 11-13 and
+31-34, which `bench/bench_volume.py` reports, were not used): a branch starts and ends
+where the volume's curve does, not at the capsule body's joints.
 """
 
 from __future__ import annotations
@@ -39,6 +43,16 @@ HIP_OUT = 0.10
 leg's length (its polyline's, crotch to toe)."""
 HIP_UP = 0.10
 """How far the hips lie above the crotch, as a fraction of the leg's length."""
+LEG_LENGTH_QUANTILE = 75.0
+"""Percentile over the take of a leg's carved length (crotch to toe) taken as its length:
+frames with the legs apart give it, frames with the feet together (one column of
+voxels, the crotch far down) fall below it."""
+LEG_STATURE = 0.58
+"""A leg's length (crotch to toe along the volume's curve) as a fraction of the stature
+(the head's top above the floor, its 90th percentile over the take)."""
+MERGED_LEG = 0.85
+"""A leg carved shorter than this fraction of its length is taken to be merged with the
+other (the feet together): it reaches up to its full length (`_full_leg`)."""
 SNAP = 0.12
 """Largest distance (fraction of the limb) from an elbow's or knee's nominal place to
 a model joint that replaces it."""
@@ -79,23 +93,49 @@ def humanoid_joints(fit: SequenceFit, facing: np.ndarray) -> np.ndarray:
     rest = [b for b in leaves if b not in legs]
     head = min(rest, key=lambda b: lengths[b])
     arms = [b for b in rest if b != head]
+    stature = float(np.percentile(ends[head][:, 1], 90))
     joints = np.zeros((len(fit.root), N_JOINTS, 3))
     joints[:, 0] = _at(limbs[head], LIMB_FRACTIONS["head"][0])
     for kind, pair in (("arm", arms), ("leg", legs)):
         side = np.sign((ends[pair[0]][0] - ends[pair[1]][0]) @ left) or 1.0
         for branch, sign in zip(pair, (side, -side), strict=True):
-            polyline = limbs[branch]
+            carved = limbs[branch]
+            full = _full_leg(fit, branch, carved, stature) if kind == "leg" else carved
             fractions = LIMB_FRACTIONS[kind]
             targets = _JOINTS[(kind, int(sign))]
-            inner = _model_joint_fractions(fit, branch, polyline)
+            inner = _model_joint_fractions(fit, branch, full)
             hinge = 1 if kind == "arm" else 0  # the elbow's or knee's place in `fractions`
             for k, (joint, fraction) in enumerate(zip(targets, fractions, strict=True)):
                 snapped = k == hinge and len(inner) and np.min(np.abs(inner - fraction)) <= SNAP
                 place = inner[np.argmin(np.abs(inner - fraction))] if snapped else fraction
-                joints[:, joint] = _at(polyline, float(place))
+                ankle = kind == "leg" and k == len(fractions) - 1
+                joints[:, joint] = _at(carved if ankle else full, float(place))
             if kind == "leg":
-                joints[:, _HIPS[int(sign)]] = _hip(polyline, joints[:, targets[0]])
+                joints[:, _HIPS[int(sign)]] = _hip(full, joints[:, targets[0]])
     return joints
+
+
+def _full_leg(fit: SequenceFit, branch: int, leg: np.ndarray, stature: float) -> np.ndarray:
+    """The leg polyline (n, k, 3) of `branch` with its start moved up to the leg's length
+    from the toe, along the volume's curve through the crotch towards the root, where
+    the leg is carved shorter than `MERGED_LEG` of that length: with the feet together
+    the legs carve one column and their branches part far below the hips, which would
+    pull hips and knees down. The length is the larger of the take's (its
+    `LEG_LENGTH_QUANTILE` percentile) and `LEG_STATURE` of the `stature` (m), for takes
+    whose feet never part."""
+    own = arc_lengths(leg)[:, -1]
+    take = max(np.percentile(own, LEG_LENGTH_QUANTILE), LEG_STATURE * stature)
+    length = np.where(own < MERGED_LEG * take, take, own)
+    path = [leg[:, ::-1]]
+    parent = fit.model.parents[branch]
+    while parent >= 0:
+        path.append(_limb(fit, parent)[:, -2::-1])
+        parent = fit.model.parents[parent]
+    up = np.concatenate(path, axis=1)  # toe, ..., crotch, ..., root
+    reach = length / np.maximum(arc_lengths(up)[:, -1], 1e-12)
+    out = leg.copy()
+    out[:, 0] = points_along(up, np.minimum(reach, 1.0)[:, None])[:, 0]
+    return out
 
 
 def _hip(leg: np.ndarray, knee: np.ndarray) -> np.ndarray:

@@ -101,6 +101,16 @@ def test_human_wave_has_human_topology_and_maps_to_13_joints() -> None:
     assert np.nanmean(report.errors[:, [7, 8]]) < 9.0  # cm: hips placed out and up from the crotch
 
 
+def test_hips_of_a_subject_with_the_feet_together_stay_up() -> None:
+    """Standing with the feet together, the legs carve one column and their branches part
+    far below the hips; the legs reach up to the stature's leg length, so hips and knees
+    map within 10 cm (34.6 and 21.1 cm from the carved crotch alone)."""
+    report = human_take("wave", seed=1, seconds=1.5, exaggerate=False)
+    assert report.capture.fit.model.branch_count == 5
+    assert np.nanmean(report.errors[:, [7, 8]]) < 10.0  # cm
+    assert np.nanmean(report.errors[:, [9, 10]]) < 10.0  # cm
+
+
 def test_fast_jumping_jack_arms_stay_matched_across_frames() -> None:
     """At 10 Hz the arms of a jumping jack move farther than 0.25 m between frames; they
     must still be matched (not interpolated in time), so the wrists map within 8 cm
