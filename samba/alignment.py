@@ -50,8 +50,9 @@ class Alignment:
     def from_markers(cls, markers: np.ndarray, scale_by_tibia: bool = False) -> Alignment:
         """The alignment of marker sets (n, 8, 3) in meters, NaN for missing markers."""
         markers = _as_batch(markers)
-        if np.isnan(markers).any():
-            origin, yaw = _partial_origin_and_yaw(markers, ~np.isnan(markers).any(axis=-1))
+        missing = np.isnan(markers)
+        if missing.any():
+            origin, yaw = _partial_origin_and_yaw(markers, ~missing.any(axis=-1))
         else:
             origin = np.add.reduce(markers, axis=1) * (1.0 / N_MARKERS)
             line = markers[:, 0] - markers[:, 1]
@@ -79,8 +80,9 @@ class Alignment:
         turn = np.zeros((len(self.yaw), 3, 3))
         turn[:, 0, 0] = turn[:, 2, 2] = c
         turn[:, 1, 1] = factor
-        turn[:, 2 if transpose else 0, 0 if transpose else 2] = -s
-        turn[:, 0 if transpose else 2, 2 if transpose else 0] = s
+        minus, plus = ((2, 0), (0, 2)) if transpose else ((0, 2), (2, 0))
+        turn[:, minus[0], minus[1]] = -s
+        turn[:, plus[0], plus[1]] = s
         return turn
 
     @property

@@ -187,7 +187,8 @@ class Reconstructor:
         for row, missing in enumerate(sets, start=1):
             markers[row, list(missing)] = np.nan
         markers = markers[self.usable(~np.isnan(markers).any(axis=-1))]
-        self.source.query(markers[1:], k=1, eps=self.config.eps)
+        if len(markers) > 1:
+            self.source.query(markers[1:], k=1, eps=self.config.eps)
         if self.config.part_k:
             poses = np.repeat(standard_pose()[None], len(markers), axis=0)
             refine_with_parts(self.source, markers, poses, 1, self.config.eps)

@@ -38,7 +38,7 @@ from service.vmc import VmcSender, frame_bundles, unity_values
 
 PREPARED_MISSING = 2
 """A session prepares the pose index for up to this many missing markers when it opens
-(`Reconstructor.prepare`; 0.6 s for `samba`, 3 s for `best` at 10^4 poses), so that the
+(`Reconstructor.prepare`; 0.6 s for `samba`, 2 s for `best` at 10^4 poses), so that the
 first occlusions of a capture do not stall frames while masked tables are built."""
 
 

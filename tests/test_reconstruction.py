@@ -182,11 +182,14 @@ def test_prepared_index_builds_nothing_when_markers_are_lost(
     )
     r = chosen.build(PoseIndex.build(poses))
     assert r.prepare(2) == 36
-    built: list[int] = []
+    built: list[np.ndarray] = []
     real = db.index.marker_features
-    monkeypatch.setattr(
-        db.index, "marker_features", lambda *a, **k: built.append(1) or real(*a, **k)
-    )
+
+    def counted(poses: np.ndarray, keep: np.ndarray, *args: object) -> np.ndarray:
+        built.append(keep)
+        return real(poses, keep, *args)
+
+    monkeypatch.setattr(db.index, "marker_features", counted)
     _, markers = _observe("walk", seed=502)
     lost = np.random.default_rng(1).random(markers.shape[:2]) < 0.1
     lost[np.cumsum(lost, axis=1) > 2] = False  # at most two markers lost per frame
