@@ -19,6 +19,7 @@ Conventions (FORMATS.md §0):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -91,6 +92,9 @@ class HumanoidRig:
             )
         if not (np.isfinite(rest).all() and np.isfinite(tips).all()):
             raise ValueError("rig rest positions must be finite")
+        rest, tips = rest.copy(), tips.copy()
+        rest.setflags(write=False)
+        tips.setflags(write=False)
         object.__setattr__(self, "rest", rest)
         object.__setattr__(self, "tips", tips)
 
@@ -135,16 +139,17 @@ class HumanoidRig:
         """Unity / VRM humanoid bone names, in bone order."""
         return BONE_NAMES
 
-    @property
+    @cached_property
     def offsets(self) -> np.ndarray:
         """Rest offset (17, 3) of each bone's joint from its parent's joint, meters; the
-        root's entry is its rest position."""
+        root's entry is its rest position. Read only (computed once: the rig is frozen)."""
         parents = np.array(PARENTS)
         out = self.rest.copy()
         out[1:] -= self.rest[parents[1:]]
+        out.setflags(write=False)
         return out
 
-    @property
+    @cached_property
     def leg_length(self) -> float:
         """Mean hip-to-ankle length along the legs in the rest pose, meters."""
         rest = self.rest
@@ -158,7 +163,7 @@ class HumanoidRig:
             )
         )
 
-    @property
+    @cached_property
     def ankle_height(self) -> float:
         """Height of the ankles above the floor in the rest pose, meters."""
         return float(self.rest[[13, 16], 1].mean())

@@ -258,7 +258,7 @@ def _bend_axis(
     plane = _cross(u, _unit(lower))
     sine = _norm(plane)
     plane = plane / np.maximum(sine, 1e-12)
-    w = np.clip((sine - _STRAIGHT[0]) / (_STRAIGHT[1] - _STRAIGHT[0]), 0.0, 1.0)
+    w = np.minimum(np.maximum((sine - _STRAIGHT[0]) / (_STRAIGHT[1] - _STRAIGHT[0]), 0.0), 1.0)
     w = w * w * (3 - 2 * w)
     bent = w[..., 0] == 1.0
     last_bent = np.maximum.accumulate(np.where(bent, np.arange(len(u))[:, None], -1), axis=0)
@@ -286,7 +286,8 @@ def _feet(level: np.ndarray, shin: np.ndarray, horizontal: np.ndarray) -> np.nda
     """Foot world rotations (..., 3, 3): the `level` ones where the knee axis is near
     horizontal (`horizontal` (..., 1), the length of its horizontal part), otherwise the
     `shin`'s (blended in between)."""
-    w = np.clip((horizontal - _LEVEL_FOOT[0]) / (_LEVEL_FOOT[1] - _LEVEL_FOOT[0]), 0.0, 1.0)
+    w = (horizontal - _LEVEL_FOOT[0]) / (_LEVEL_FOOT[1] - _LEVEL_FOOT[0])
+    w = np.minimum(np.maximum(w, 0.0), 1.0)
     if np.all(w == 1.0):
         return level
     q_level = _quaternions(level)
@@ -300,7 +301,9 @@ def _frame(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:
     orthogonal to it, and their cross product (all normalised)."""
     e1 = _unit(primary)
     e2 = _unit(secondary - _dot(secondary, e1) * e1)
-    return np.stack([e1, e2, _cross(e1, e2)], axis=-1)
+    frames = np.empty((*e1.shape, 3))
+    frames[..., 0], frames[..., 1], frames[..., 2] = e1, e2, _cross(e1, e2)
+    return frames
 
 
 def _quaternions(matrices: np.ndarray) -> np.ndarray:
