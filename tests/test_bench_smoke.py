@@ -109,7 +109,11 @@ def test_volume_benchmark_prints_its_tables(capsys: pytest.CaptureFixture[str]) 
     creatures = bench_volume.bench_creatures([0], frames=8)
     out = capsys.readouterr().out
     assert "Human takes" in out and "Creatures" in out
-    assert [r[0] for r in humans] == ["jumping_jacks-11", "wave-11"]
+    assert [r[0] for r in humans] == [
+        "jumping_jacks-11",
+        "wave-11",
+        *[f"{motion}-11 natural" for motion in ("jumping_jacks", "wave", "squat", "arm_swing")],
+    ]
     assert [r[0] for r in creatures] == ["quadruped-0", "chain-0"]
 
 
