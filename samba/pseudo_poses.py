@@ -159,8 +159,8 @@ def pseudo_poses(poses: np.ndarray, noise: AngleNoise) -> np.ndarray:
     safe_r = np.where(straight, 1.0, r)
     # One matrix product per (neighbour, chain) over the whole batch, whose coefficients
     # (K, 5, 2N, 21) every frame shares: lift the numbers against the local axes into
-    # (K, 5, 21, B * 3) and multiply. Both factors are filled column by column (np.stack
-    # and np.moveaxis cost more than the arithmetic at live-path sizes).
+    # (K, 5, 21, B * 3) and multiply. Both factors are filled in place, slice by slice
+    # (np.stack and np.moveaxis cost more than the arithmetic at live-path sizes).
     batch = poses.shape[:-3]
     size = math.prod(batch)
     numbers = np.empty((k, 5, N_LIMB_NUMBERS, size))  # (K, 5, 7, B)
