@@ -158,7 +158,9 @@ def read_state(conn: sqlite3.Connection) -> dict[str, str]:
     return dict(conn.execute("SELECT key, value FROM state").fetchall())
 
 
-def read_takes(conn: sqlite3.Connection) -> list[TakeInfo]:
-    """All catalog rows, ordered by first row."""
-    rows = conn.execute(f"SELECT {TAKE_COLUMNS} FROM takes ORDER BY first_row, id").fetchall()
+def read_takes(conn: sqlite3.Connection, after_id: int = 0) -> list[TakeInfo]:
+    """The catalog rows with an id above `after_id` (0: all), ordered by first row."""
+    rows = conn.execute(
+        f"SELECT {TAKE_COLUMNS} FROM takes WHERE id > ? ORDER BY first_row, id", (after_id,)
+    ).fetchall()
     return [take_from_row(r) for r in rows]

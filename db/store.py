@@ -103,6 +103,8 @@ class PoseStore:
     def __init__(self, path: Path) -> None:
         self.path = path
         self._index: PoseIndex | None = None
+        self.takes: list[TakeInfo] = []
+        self._revision: str | None = None
         self.refresh()
 
     # -- opening -------------------------------------------------------------------------
@@ -166,7 +168,11 @@ class PoseStore:
         try:
             conn.execute("BEGIN")
             state = read_state(conn)
-            takes = read_takes(conn)
+            revision = state.get("revision")
+            # Catalog rows are read again only when another commit changed them: a loop of
+            # imports would otherwise read every row after each file (quadratic time).
+            same = revision is not None and revision == self._revision
+            takes = self.takes if same else read_takes(conn)
             conn.execute("COMMIT")
         except (sqlite3.DatabaseError, ValueError) as exc:  # ValueError: bad text or JSON
             raise StoreError(str(self.path / CATALOG), f"catalog unreadable: {exc}") from exc
@@ -190,6 +196,7 @@ class PoseStore:
         self.take_ids = rows[:, 0]
         self.frames = rows[:, 1]
         self.takes = takes
+        self._revision = revision
         self.generation = state["generation"]
         self.data_name = name
         self.scale_by_tibia = state.get("scale_by_tibia") == "1"
@@ -302,14 +309,18 @@ class PoseStore:
                 fcntl.flock(fh, fcntl.LOCK_UN)
 
     @contextlib.contextmanager
-    def _writing(self, poses_change: bool = True) -> Iterator[sqlite3.Connection]:
+    def _writing(
+        self, poses_change: bool = True, appends_only: bool = False
+    ) -> Iterator[sqlite3.Connection]:
         """Lock the store, open a write transaction; commit and refresh on success.
 
         Inside, this object's snapshot is the committed state the transaction starts
         from (another object or process may have committed since it was taken). Data
         files of other states are deleted before and after, under the lock. With
         `poses_change` the commit gets a new generation, which makes the saved index
-        stale. Raising inside rolls everything back.
+        stale. Every commit gets a new catalog revision; with `appends_only` (the body
+        only inserts takes) this object's take list is extended by the new rows rather
+        than read again. Raising inside rolls everything back.
         """
         with self._lock():
             conn = self._connect()
@@ -323,6 +334,11 @@ class PoseStore:
                         "UPDATE state SET value = ? WHERE key = 'generation'",
                         (uuid.uuid4().hex,),
                     )
+                revision = uuid.uuid4().hex
+                conn.execute(
+                    "INSERT OR REPLACE INTO state (key, value) VALUES ('revision', ?)", (revision,)
+                )
+                takes = self._takes_after(conn) if appends_only else read_takes(conn)
                 conn.execute("COMMIT")
             except BaseException:
                 if conn.in_transaction:
@@ -330,8 +346,15 @@ class PoseStore:
                 raise
             finally:
                 conn.close()
+            self.takes, self._revision = takes, revision
             self.refresh()
             self._remove_orphans({"data_name": self.data_name})
+
+    def _takes_after(self, conn: sqlite3.Connection) -> list[TakeInfo]:
+        """This snapshot's takes followed by the rows a transaction inserted after them
+        (ids above every id of the snapshot; they hold the rows after the snapshot's)."""
+        last = max((t.id for t in self.takes), default=0)
+        return self.takes + read_takes(conn, after_id=last)
 
     def _remove_orphans(self, state: dict[str, str]) -> None:
         current = {f"poses-{state['data_name']}.f32", f"rows-{state['data_name']}.i32"}
@@ -371,7 +394,7 @@ class PoseStore:
     def _add_variants(
         self, take: Take, variants: list[tuple[np.ndarray, bool]], frames: np.ndarray
     ) -> list[int]:
-        with self._writing() as conn:
+        with self._writing(appends_only=True) as conn:
             row = conn.execute(
                 "SELECT id FROM takes WHERE content_hash = ? AND mirrored = 0",
                 (take.content_hash,),

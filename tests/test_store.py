@@ -704,6 +704,40 @@ def test_an_older_store_object_removes_after_another_removed(store: PoseStore, p
         other.remove(["c"])
 
 
+def test_imports_read_only_their_own_catalog_rows(
+    path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Re-reading the whole catalog after each import made importing a folder of 2,000
+    # files quadratic (109 ms per file at the end, against 8.5 ms now).
+    import db.store
+
+    rows_read = []
+    read_takes = db.store.read_takes
+
+    def counting(*args: object, **kwargs: object) -> list:
+        takes = read_takes(*args, **kwargs)
+        rows_read.append(len(takes))
+        return takes
+
+    monkeypatch.setattr(db.store, "read_takes", counting)
+    store = PoseStore.create(path)
+    for i in range(40):
+        store.add(make_take(f"t{i}", 5, seed=i), mirror=i % 2 == 0, build_index=False)
+    assert sum(rows_read) == 60  # each row once: 40 takes and 20 mirrors
+    assert [t.name for t in store.takes] == [t.name for t in PoseStore.open(path).takes]
+
+
+def test_a_snapshot_sees_what_another_store_object_committed(store: PoseStore, path: Path) -> None:
+    other = PoseStore.open(path)
+    other.label("b", subject="s07")
+    other.add(make_take("d", 10, seed=4))
+    store.refresh()
+    assert store.take("b").subject == "s07" and [t.name for t in store.takes] == list("abcd")
+    store.label("d", action="jump")  # its own commit builds on the other object's
+    other.refresh()
+    assert other.take("d").action == "jump" and other.take("b").subject == "s07"
+
+
 def test_a_tibia_scaled_store_keeps_its_setting_and_rebuilds_a_mismatched_index(
     tmp_path: Path,
 ) -> None:
