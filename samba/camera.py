@@ -164,9 +164,10 @@ class Camera:
         """The (3, 4) projection matrix K [R | t] (distortion not included)."""
         return self.matrix @ np.hstack([self.rotation_matrix, self.translation[:, None]])
 
-    @property
+    @cached_property
     def has_distortion(self) -> bool:
-        """Whether any distortion coefficient is non-zero."""
+        """Whether any distortion coefficient is non-zero (asked on every projection and
+        undistortion, so computed once: the coefficients are read only)."""
         return bool(np.any(self.distortion != 0.0))
 
     def to_camera(self, points: np.ndarray) -> np.ndarray:
