@@ -12,8 +12,12 @@ when one explanation fits and no other comes near:
   unlabelled blobs of two cameras. Each is triangulated (DLT).
 * a hypothesis *fits* when every view reprojects within `epipolar_px` (so the blob lies
   on the label's epipolar lines) and its 3D point is within the label's 3D gate of the
-  label's prediction; it *comes near* with twice the reprojection tolerance and the gate
-  plus `rival_margin_m`.
+  label's prediction (with two views only, `gate_m`: two markers' blobs can meet by
+  chance); it *comes near* with twice the reprojection tolerance and the gate plus
+  `rival_margin_m`. A label lost for more than `FRESH_FRAMES` has no trusted prediction:
+  a hypothesis fits when its point lies within the label's range from its `FOLLOWS`
+  neighbour (`SHORTEST_SPAN` of the standing distance up to it plus `span_slack_m`), and
+  comes near within `rival_margin_m` more.
 * a fitting hypothesis stands when every hypothesis of the same label that comes near
   puts the same blob in each of its new cameras, no hypothesis of another label that
   comes near uses any of its blobs, and no other label lost in its new cameras projects
@@ -217,13 +221,11 @@ class CrossViewLabeller:
             near_body = np.where(
                 np.isnan(span), True, (span >= low - margin) & (span <= high + margin)
             )
-            # two views can meet by chance (a ghost): only near a fresh prediction
+            # two views can meet by chance (a ghost): near a fresh prediction only within
+            # the first gate; a stale label, in either case, within its body range
             two_views = (~np.isnan(hypotheses.pixels).any(axis=-1)).sum(axis=0) == 2
-            fits = (ratio <= 1.0) & np.where(
-                two_views,
-                ~stale & (off <= self.settings.gate_m),
-                np.where(stale, in_body, off <= limit),
-            )
+            fresh_limit = np.where(two_views, self.settings.gate_m, limit)
+            fits = (ratio <= 1.0) & np.where(stale, in_body, off <= fresh_limit)
             near = (ratio <= RIVAL_ERROR_FACTOR) & np.where(
                 stale, near_body, off <= np.maximum(reach, limit + margin)
             )

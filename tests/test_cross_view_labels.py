@@ -7,7 +7,7 @@ import pytest
 
 from samba.camera import Camera, CameraGroup
 from samba.camera_chain import ChainSettings, run_chain
-from samba.cross_view_labels import CrossViewLabeller, Reacquisition
+from samba.cross_view_labels import FRESH_FRAMES, CrossViewLabeller, Reacquisition
 from samba.errors import InputError
 from samba.observation import spread_cameras
 from samba.skeleton import markers_of, standing_pose
@@ -81,6 +81,53 @@ def test_two_blobs_on_the_epipolar_line_leave_the_label_lost(markers: np.ndarray
     out, found = labeller.step(labelled, unlabelled)
     assert found == []
     assert np.isnan(out[1, L_WRIST]).all()
+
+
+def _lost_for_a_while(labeller: CrossViewLabeller, pixels: np.ndarray, labels: list[int]) -> None:
+    """Step the labeller through FRESH_FRAMES + 1 frames with `labels` lost everywhere and
+    no blob of theirs in sight."""
+    labelled = pixels.copy()
+    labelled[:, labels] = np.nan
+    for _ in range(FRESH_FRAMES + 1):
+        labeller.step(labelled, [np.zeros((0, 2))] * len(pixels))
+
+
+def test_a_label_lost_long_is_found_again_within_reach_of_its_neighbour(
+    markers: np.ndarray,
+) -> None:
+    # Two cameras: the wrist comes back 25 cm from where it was lost (beyond the gate of
+    # a fresh prediction), within arm's reach of its shoulder, the one blob pair in sight.
+    cameras = _group(markers, 2)
+    labeller = CrossViewLabeller(cameras, markers)
+    _lost_for_a_while(labeller, cameras.project(markers), [R_WRIST])
+    moved = markers.copy()
+    moved[R_WRIST] += [0.0, 0.15, 0.2]
+    pixels = cameras.project(moved)
+    labelled = pixels.copy()
+    labelled[:, R_WRIST] = np.nan
+    out, found = labeller.step(labelled, _unlabelled(pixels, {0: [R_WRIST], 1: [R_WRIST]}))
+    np.testing.assert_allclose(out[:, R_WRIST], pixels[:, R_WRIST])
+    assert {(f.camera, f.label) for f in found} == {(0, R_WRIST), (1, R_WRIST)}
+
+
+def test_two_labels_lost_long_that_could_take_the_same_blobs_stay_lost(
+    markers: np.ndarray,
+) -> None:
+    cameras = _group(markers, 2)
+    labeller = CrossViewLabeller(cameras, markers)
+    _lost_for_a_while(labeller, cameras.project(markers), [L_WRIST, R_WRIST])
+    moved = markers.copy()
+    moved[[L_WRIST, R_WRIST]] = (markers[L_WRIST] + markers[R_WRIST]) / 2 + [
+        [0.05, 0.3, 0.3],
+        [-0.05, 0.3, 0.3],
+    ]
+    pixels = cameras.project(moved)
+    labelled = pixels.copy()
+    labelled[:, [L_WRIST, R_WRIST]] = np.nan
+    unlabelled = _unlabelled(pixels, {0: [L_WRIST, R_WRIST], 1: [L_WRIST, R_WRIST]})
+    out, found = labeller.step(labelled, unlabelled)
+    assert found == []  # hands together in front: either wrist could be either blob
+    assert np.isnan(out[:, [L_WRIST, R_WRIST]]).all()
 
 
 def test_a_blob_far_from_the_prediction_is_not_taken(markers: np.ndarray) -> None:
