@@ -9,15 +9,19 @@ polyline from its branch's start (the root or a branching node: the top of the t
 for arms and head, the crotch for legs) through the model's joints to its end (the
 tip of the hand, foot or head). A capture joint sits at a fixed fraction of that
 polyline's length (`LIMB_FRACTIONS`), except elbows and knees, which take the model's
-own joint nearest that fraction when one lies within `SNAP` of it. The hips are not on
+own joint nearest that fraction when one lies within `SNAP` of it. The shoulders are
+not on the arms' polylines: the arms branch from the top of the trunk, between the
+shoulders, so each shoulder is that branch start moved out, level, by `SHOULDER_OUT` of
+the arm's length, along the horizontal line from the other arm to its own (taken at
+`SHOULDER_AXIS_AT` of both arms' lengths, about the elbows). The hips are not on
 the legs' polylines: the legs part at the crotch, below and between the hips, so each
 hip is the crotch moved out towards its knee's side and up, by fractions of the leg's
 length (`HIP_OUT`, `HIP_UP`). With the feet together the legs carve one column and
 their branches part far below the hips; a leg carved much shorter than its length then
 reaches up from the toe along the volume's curve through the crotch to that length,
-and its knee and hip are placed on that reach (`_full_leg`). The shoulder's fraction is
-its place on the arm of the capsule body; the others, the hips' offsets and the leg's
-reach (`LEG_STATURE`, `MERGED_LEG`) were fitted on takes of seeds 1-5 (seeds 11-13 and
+and its knee and hip are placed on that reach (`_full_leg`). The fractions, the
+shoulders' and hips' offsets and the leg's reach (`LEG_STATURE`, `MERGED_LEG`) were
+fitted on takes of seeds 1-5 (seeds 11-13 and
 31-34, which `bench/bench_volume.py` reports, were not used): a branch starts and ends
 where the volume's curve does, not at the capsule body's joints.
 """
@@ -32,12 +36,18 @@ from samba.sequence_model import SequenceFit
 from samba.skeleton import N_JOINTS
 
 LIMB_FRACTIONS: dict[str, tuple[float, ...]] = {
-    "arm": (0.19, 0.58, 0.84),
+    "arm": (0.58, 0.84),
     "leg": (0.40, 0.84),
     "head": (0.45,),
 }
-"""Fractions of a limb's length from its branch start: arm (shoulder, elbow, wrist),
-leg (knee, ankle), head (the head joint)."""
+"""Fractions of a limb's length from its branch start: arm (elbow, wrist), leg (knee,
+ankle), head (the head joint)."""
+SHOULDER_OUT = 0.20
+"""How far a shoulder lies out from its arm's branch start, level, as a fraction of the
+arm's length (its polyline's, branch start to hand tip)."""
+SHOULDER_AXIS_AT = 0.5
+"""Where along both arms (fraction of their lengths) the line between them is taken
+whose horizontal direction points each shoulder out."""
 HIP_OUT = 0.10
 """How far a hip lies out from the crotch, towards its knee's side, as a fraction of the
 leg's length (its polyline's, crotch to toe)."""
@@ -57,14 +67,16 @@ SNAP = 0.12
 """Largest distance (fraction of the limb) from an elbow's or knee's nominal place to
 a model joint that replaces it."""
 _JOINTS = {
-    ("arm", 1): (1, 3, 5),
-    ("arm", -1): (2, 4, 6),
+    ("arm", 1): (3, 5),
+    ("arm", -1): (4, 6),
     ("leg", 1): (9, 11),
     ("leg", -1): (10, 12),
 }
 """(limb, side: +1 left, -1 right) -> the capture joints along it, in fraction order."""
 _HIPS = {1: 7, -1: 8}
 """Side (+1 left, -1 right) -> the hip joint."""
+_SHOULDERS = {1: 1, -1: 2}
+"""Side (+1 left, -1 right) -> the shoulder joint."""
 
 
 def humanoid_joints(fit: SequenceFit, facing: np.ndarray) -> np.ndarray:
@@ -98,20 +110,21 @@ def humanoid_joints(fit: SequenceFit, facing: np.ndarray) -> np.ndarray:
     joints[:, 0] = _at(limbs[head], LIMB_FRACTIONS["head"][0])
     for kind, pair in (("arm", arms), ("leg", legs)):
         side = np.sign((ends[pair[0]][0] - ends[pair[1]][0]) @ left) or 1.0
-        for branch, sign in zip(pair, (side, -side), strict=True):
+        for branch, other, sign in zip(pair, pair[::-1], (side, -side), strict=True):
             carved = limbs[branch]
             full = _full_leg(fit, branch, carved, stature) if kind == "leg" else carved
             fractions = LIMB_FRACTIONS[kind]
             targets = _JOINTS[(kind, int(sign))]
             inner = _model_joint_fractions(fit, branch, full)
-            hinge = 1 if kind == "arm" else 0  # the elbow's or knee's place in `fractions`
             for k, (joint, fraction) in enumerate(zip(targets, fractions, strict=True)):
-                snapped = k == hinge and len(inner) and np.min(np.abs(inner - fraction)) <= SNAP
+                snapped = k == 0 and len(inner) and np.min(np.abs(inner - fraction)) <= SNAP
                 place = inner[np.argmin(np.abs(inner - fraction))] if snapped else fraction
                 ankle = kind == "leg" and k == len(fractions) - 1
                 joints[:, joint] = _at(carved if ankle else full, float(place))
             if kind == "leg":
                 joints[:, _HIPS[int(sign)]] = _hip(full, joints[:, targets[0]])
+            else:
+                joints[:, _SHOULDERS[int(sign)]] = _shoulder(carved, limbs[other])
     return joints
 
 
@@ -136,6 +149,16 @@ def _full_leg(fit: SequenceFit, branch: int, leg: np.ndarray, stature: float) ->
     out = leg.copy()
     out[:, 0] = points_along(up, np.minimum(reach, 1.0)[:, None])[:, 0]
     return out
+
+
+def _shoulder(arm: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """(n, 3) the shoulder of an arm polyline (n, k, 3) given the other arm's (n, m, 3):
+    its branch start moved out, level, by `SHOULDER_OUT` of the arm's length along the
+    horizontal direction from the other arm to it at `SHOULDER_AXIS_AT`, meters."""
+    at = np.array([SHOULDER_AXIS_AT])
+    out = (points_along(arm, at)[:, 0] - points_along(other, at)[:, 0]) * [1.0, 0.0, 1.0]
+    out /= np.maximum(np.linalg.norm(out, axis=-1, keepdims=True), 1e-12)
+    return arm[:, 0] + SHOULDER_OUT * out * arc_lengths(arm)[:, -1:]
 
 
 def _hip(leg: np.ndarray, knee: np.ndarray) -> np.ndarray:
