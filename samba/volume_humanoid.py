@@ -155,9 +155,7 @@ def _shoulder(arm: np.ndarray, other: np.ndarray) -> np.ndarray:
     """(n, 3) the shoulder of an arm polyline (n, k, 3) given the other arm's (n, m, 3):
     its branch start moved out, level, by `SHOULDER_OUT` of the arm's length along the
     horizontal direction from the other arm to it at `SHOULDER_AXIS_AT`, meters."""
-    at = np.array([SHOULDER_AXIS_AT])
-    out = (points_along(arm, at)[:, 0] - points_along(other, at)[:, 0]) * [1.0, 0.0, 1.0]
-    out /= np.maximum(np.linalg.norm(out, axis=-1, keepdims=True), 1e-12)
+    out = _level_direction(_at(arm, SHOULDER_AXIS_AT) - _at(other, SHOULDER_AXIS_AT))
     return arm[:, 0] + SHOULDER_OUT * out * arc_lengths(arm)[:, -1:]
 
 
@@ -167,9 +165,14 @@ def _hip(leg: np.ndarray, knee: np.ndarray) -> np.ndarray:
     length and up by `HIP_UP` of it, meters."""
     crotch = leg[:, 0]
     length = arc_lengths(leg)[:, -1:]
-    out = (knee - crotch) * [1.0, 0.0, 1.0]
-    out /= np.maximum(np.linalg.norm(out, axis=-1, keepdims=True), 1e-12)
+    out = _level_direction(knee - crotch)
     return crotch + (HIP_OUT * out + [0.0, HIP_UP, 0.0]) * length
+
+
+def _level_direction(vectors: np.ndarray) -> np.ndarray:
+    """(n, 3) the horizontal directions (unit, y = 0) of vectors (n, 3)."""
+    level = vectors * [1.0, 0.0, 1.0]
+    return level / np.maximum(np.linalg.norm(level, axis=-1, keepdims=True), 1e-12)
 
 
 def _limb(fit: SequenceFit, branch: int) -> np.ndarray:
