@@ -18,9 +18,9 @@ over cameras and frames.
 A second table films each take as the subject leaving and coming back
 (`leave_and_return`): its first half, a second with nobody on the stage, then the
 second half 1.3 m away, turned 25 degrees from where the take started, after a second
-in the standard pose. With three cameras or more the stage finds the subject again
-(`samba.standard_pose_search`); the baseline rows are the same stage without that
-search, on the same frames. "lost after return" counts from the end of that second.
+in the standard pose. The stage finds the subject again (`samba.standard_pose_search`);
+the baseline rows are the same stage without that search, on the same frames. "lost
+after return" counts from the end of that second.
 
 A third table places random subjects in the standard pose on the stage
 (`samba.synthetic.random_standing`: bodies 1.5-1.95 m with segments scaled 0.9-1.1,
@@ -80,6 +80,8 @@ nearest-neighbour filter."""
 
 
 RETURN_CONFIGURATIONS = (
+    ("2 cameras", 2, (320, 240), True),
+    ("2 cameras, no search", 2, (320, 240), False),
     ("3 cameras", 3, (320, 240), True),
     ("3 cameras, no search", 3, (320, 240), False),
     ("3 cameras", 3, (640, 480), True),

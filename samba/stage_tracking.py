@@ -18,14 +18,16 @@ adds the labels the nodes lost (and drops a label whose views disagree). A node 
 follows every frame keeps the labels through frames the server never gets, and the
 server keeps finding the ones it lost.
 
-With three cameras or more, a stage that has lost the subject (fewer than
-`MIN_TRIANGULATED` markers triangulate: it left, or every view was blocked) looks for it
-again in every frame's blobs: standing in the standard pose anywhere on the stage,
-facing the front as at the start (`samba.standard_pose_search`; the front is the start's
-heading, or with `from_labels` the heading of the first frame whose markers all
-triangulated). When found, every camera's tracker and the cross-view labelling start
-again from there. With two cameras, points of blobs paired the wrong way make that
-search unsafe, and it is off.
+A stage that has lost the subject (fewer than `MIN_TRIANGULATED` markers triangulate: it
+left, or every view was blocked) looks for it again in every frame's blobs: standing in
+the standard pose anywhere on the stage, facing the front as at the start
+(`samba.standard_pose_search`; the front is the start's heading, or with `from_labels`
+the heading of the first frame whose markers all triangulated). When found, every
+camera's tracker and the cross-view labelling start again from there. Two cameras
+search too: on 300 random standing subjects (0.3 px noise, 3 stray spots per camera)
+the search found 89% with no label on a wrong blob (three cameras: 90%, one frame with
+a wrong label), and on 395 frames of four CMU takes in other poses it fired 8 times,
+each time labelling every blob right (three cameras: 10 times, 4 with a wrong label).
 """
 
 from __future__ import annotations
@@ -45,8 +47,6 @@ from samba.triangulation import triangulate_cameras
 MIN_TRIANGULATED = 3
 """Fewer markers triangulated than this (the fewest a reconstruction uses) and the stage
 has lost the subject: it searches for the standard pose."""
-MIN_SEARCH_CAMERAS = 3
-"""Cameras the search for the standard pose needs (see the module docstring)."""
 
 
 class StageTracker:
@@ -55,8 +55,8 @@ class StageTracker:
     `trackers` one `MarkerTracker` per camera; `initial` (8, 3) meters where the markers
     are when capture starts, or None to start the cross-view labelling at the first
     frame whose markers all triangulate; `cross_view` its settings (None: each camera's
-    tracker alone); `search` whether a stage of three cameras or more that lost the
-    subject looks for it in the standard pose (with the cross-view labelling only).
+    tracker alone); `search` whether a stage that lost the subject looks for it in the
+    standard pose (with the cross-view labelling only).
     Call `step` once per frame, in order.
     """
 
@@ -76,7 +76,7 @@ class StageTracker:
         self.trackers = list(trackers)
         self._cross_view = cross_view
         self._labeller = None
-        self._searches = search and len(cameras) >= MIN_SEARCH_CAMERAS
+        self._searches = search
         self._search: StandardPoseSearch | None = None
         self.searches = 0
         """How often the subject was found again in the standard pose."""
@@ -170,7 +170,7 @@ class StageTracker:
 
     def _start_labeller(self, points: np.ndarray) -> None:
         """Start the cross-view labelling at markers `points` (8, 3) meters, and the
-        search for the standard pose facing as their shoulders do (3 cameras or more)."""
+        search for the standard pose facing as their shoulders do."""
         assert self._cross_view is not None
         self._labeller = CrossViewLabeller(self.cameras, points, self._cross_view)
         if self._searches and self._search is None:

@@ -82,9 +82,9 @@ def test_bad_settings_and_blob_lists_are_refused(cameras: CameraGroup) -> None:
 class LeaveAndReturn:
     """A kick from the standard pose (`first`, (F, 13, 3) m), then the subject back 1.3 m
     away, turned 25 degrees from where it faced at the start, in the standard pose
-    before waving (`second`), seen by three 320x240 `cameras`."""
+    before waving (`second`), seen by `count` 320x240 `cameras`."""
 
-    def __init__(self) -> None:
+    def __init__(self, count: int = 3) -> None:
         kick = standing_lead_in(generate("kick", seconds=3, fps=FPS, seed=5).poses, FPS)
         wave = generate("wave", seconds=3, fps=FPS, seed=6).poses
         turn = kick.heading_deg + 25.0 - standing_lead_in(wave, FPS).heading_deg
@@ -92,7 +92,7 @@ class LeaveAndReturn:
         turned = Rotation.from_euler("y", turn, degrees=True).apply(wave.reshape(-1, 3))
         moved = turned.reshape(wave.shape) + np.array([0.9, 0.0, -0.9])
         self.second = standing_lead_in(moved, FPS, 1.0).poses
-        self.cameras = _cameras(np.concatenate([self.first, self.second]))
+        self.cameras = _cameras(np.concatenate([self.first, self.second]), count)
 
 
 @pytest.fixture(scope="module")
@@ -100,9 +100,14 @@ def scene() -> LeaveAndReturn:
     return LeaveAndReturn()
 
 
-def test_a_stage_that_lost_the_subject_finds_it_standing_elsewhere(scene: LeaveAndReturn) -> None:
+@pytest.mark.parametrize("count", [3, 2])
+def test_a_stage_that_lost_the_subject_finds_it_standing_elsewhere(
+    scene: LeaveAndReturn, count: int
+) -> None:
     """Gone for a second, back elsewhere: every label found after the return is on its own
-    marker, and after the second in the standard pose nearly all are found."""
+    marker, and after the second in the standard pose nearly all are found; with three
+    cameras or two."""
+    scene = scene if count == 3 else LeaveAndReturn(count)
     cameras = scene.cameras
     rng = np.random.default_rng(2)
     stage = StageTracker.from_labels(
