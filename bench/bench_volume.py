@@ -121,8 +121,11 @@ def bench_humans(seeds: list[int], seconds: float) -> list[list[object]]:
                         else "no frame separated"
                     ),
                     f"{model.branch_count} ends, {model.link_count} links",
-                    float(np.nanmean(report.errors)),
-                    float(np.nanmedian(report.errors)),
+                    *(
+                        (float(np.nanmean(report.errors)), float(np.nanmedian(report.errors)))
+                        if np.isfinite(report.errors).any()
+                        else ("not human", "-")
+                    ),
                 ]
             )
     print_table(

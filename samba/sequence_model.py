@@ -44,7 +44,9 @@ BRANCH_SUPPORT = 0.4
 largest such count is). The quadruped's tail is its own branch in 43-63% of the frames
 of seeds 1-3, the most frequent tree shape then had 5 ends in two of them. Human takes
 of seeds 1-3 show a sixth end in at most a third of their frames, but for one natural
-wave whose model is not human either way (6 ends before, 7 with this rule)."""
+wave whose model is not human either way (6 ends before, 7 with this rule). The cost:
+a take whose frames split evenly between five ends and a spurious sixth gets the sixth
+(the first second of the natural wave of seed 11: 5 and 5 frames, human before)."""
 BANDWIDTH = 0.04
 """Kernel width (fraction of the branch) of the joint-fraction density."""
 
