@@ -2,6 +2,7 @@
 
 Run from the project root:  python bench/bench_service.py [--seconds 10] [--sessions 1 4 8]
                               [--workers 0 2] [--method samba] [--labels server nodes]
+                              [--phases aligned independent]
 
 For each session count, each number of worker processes (`samba serve --workers`; 0 =
 frames computed in the server's event loop) and each labelling (`labels`: "server", the
@@ -11,7 +12,11 @@ default of `samba serve`, is "nodes" for these two cameras), `samba serve
 process with that many sessions (same calibration and pose database, each with its own
 VMC receiver). This process plays a synthetic walk (projected markers, 0.3 px noise) to
 every session's two cameras on a 60 fps wall-clock grid, all sessions' packets of a frame
-at once, and receives the VMC bundles. Latency is measured two ways:
+at once ("aligned" phases, the worst case: every session's frame is due in the same
+instant), or each session on its own clock, its frames offset by a fixed random fraction
+of the frame period drawn per session ("independent" phases, as separate stages whose
+cameras do not share a trigger), and receives the VMC bundles. Latency is measured two
+ways:
 
 * server: from the kernel receive time of a frame's last camera packet to its VMC
   bundles handed to the network (the server's own percentiles, `/api/metrics`);
@@ -58,6 +63,8 @@ from service.udp_input import UdpInput  # noqa: E402
 
 TARGET_P99_MS = 10.0
 FPS = 60.0
+PHASES = ("aligned", "independent")
+"""How the sessions' frame clocks lie to each other (`session_phases`)."""
 
 
 def step_ms(capture: SyntheticCapture, store: Path, name: str) -> np.ndarray:
@@ -92,21 +99,37 @@ class VmcTimes:
         return receive
 
 
-async def play(capture: SyntheticCapture, address: tuple[str, int], sessions: int) -> np.ndarray:
-    """Send every frame of `capture` to every session at its capture time; returns the
-    time (s) each frame's last packet left, (frames,)."""
-    sent = np.empty(capture.frames)
+def session_phases(sessions: int, phases: str) -> np.ndarray:
+    """Each session's clock offset (sessions,) in seconds within a frame period: all 0
+    for "aligned", seeded uniform random for "independent"."""
+    if phases == "aligned":
+        return np.zeros(sessions)
+    return np.random.default_rng(sessions).uniform(0.0, 1.0 / FPS, sessions)
+
+
+async def play(
+    capture: SyntheticCapture, address: tuple[str, int], offsets: np.ndarray
+) -> np.ndarray:
+    """Send every frame of `capture` to every session at its capture time, session s
+    `offsets[s]` seconds after the common grid; returns the time (s) each session's frame's
+    last packet left, (sessions, frames)."""
+    sessions = len(offsets)
+    sent = np.empty((sessions, capture.frames))
     start_at = time.time() + 1.0
+    due = sorted(
+        (frame / FPS + offsets[s], frame, s)
+        for frame in range(capture.frames)
+        for s in range(sessions)
+    )
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        for frame in range(capture.frames):
-            delay = start_at + frame / FPS - time.time()
+        for at, frame, s in due:
+            delay = start_at + at - time.time()
             if delay > 0:
                 await asyncio.sleep(delay)
-            for s in range(sessions):
-                for camera in range(len(capture.cameras)):
-                    packet = capture.packet(camera, frame, start_at, f"s{s}")
-                    sock.sendto(encode(packet), address)
-            sent[frame] = time.time()
+            for camera in range(len(capture.cameras)):
+                packet = capture.packet(camera, frame, start_at + offsets[s], f"s{s}")
+                sock.sendto(encode(packet), address)
+            sent[s, frame] = time.time()
     return sent
 
 
@@ -114,6 +137,7 @@ def run(
     sessions: int,
     workers: int,
     labels: str,
+    phases: str,
     capture: SyntheticCapture,
     calibration: Path,
     store: Path,
@@ -121,7 +145,8 @@ def run(
     tmp: Path,
 ) -> list[object]:
     """One row of the table: `sessions` sessions served by a `samba serve` process with
-    `workers` worker processes, labelling by `labels`."""
+    `workers` worker processes, labelling by `labels`, session clocks `phases`
+    (`session_phases`)."""
     receivers = VmcTimes(sessions)
     config = tmp / f"serve{sessions}.toml"
     tables = [
@@ -146,7 +171,7 @@ def run(
         async def serve_frames() -> np.ndarray:
             for receiver in receivers.inputs:
                 receiver.start()
-            sent = await play(capture, ("127.0.0.1", port), sessions)
+            sent = await play(capture, ("127.0.0.1", port), session_phases(sessions, phases))
             await asyncio.sleep(0.5)
             for receiver in receivers.inputs:
                 receiver.close()
@@ -161,7 +186,7 @@ def run(
     frames = capture.frames
     out = [m["frames_out"] for m in metrics["sessions"].values()]
     received = [len(t) for t in receivers.times]
-    latency = [np.array(t) - sent for t in receivers.times if len(t) == frames]
+    latency = [np.array(t) - sent[s] for s, t in enumerate(receivers.times) if len(t) == frames]
     end_to_end = np.concatenate(latency) * 1e3 if latency else np.array([np.nan])
     server_p50 = max(m["latency"]["p50_ms"] for m in metrics["sessions"].values())
     server_p99 = max(m["latency"]["p99_ms"] for m in metrics["sessions"].values())
@@ -181,7 +206,12 @@ def run(
 
 
 def bench(
-    seconds: float, sessions: list[int], workers: list[int], name: str, labels: list[str]
+    seconds: float,
+    sessions: list[int],
+    workers: list[int],
+    name: str,
+    labels: list[str],
+    phases: list[str] = PHASES,
 ) -> list[list[object]]:
     """Build the database, film the capture, measure every session count, print the
     tables; returns the rows of the latency table."""
@@ -195,8 +225,9 @@ def bench(
         with threadpool_limits(1):
             baseline = step_ms(capture, store, name)
         rows = [
-            [how, *run(n, w, how, capture, calibration, store, name, tmp)]
+            [how, phase, *run(n, w, how, phase, capture, calibration, store, name, tmp)]
             for how in labels
+            for phase in phases
             for n in sessions
             for w in workers
         ]
@@ -210,6 +241,7 @@ def bench(
         f"(latency ms; target p99 <= {TARGET_P99_MS:g} ms at 4 sessions)",
         [
             "labels",
+            "phases",
             "sessions",
             "workers",
             "packets",
@@ -226,8 +258,8 @@ def bench(
     )
     print_table(
         "Ratios to the baseline step p50",
-        ["labels", "sessions", "workers", "server p50 / step", "e2e p99 / step"],
-        [[r[0], r[1], r[2], r[6] / base, r[9] / base] for r in rows],
+        ["labels", "phases", "sessions", "workers", "server p50 / step", "e2e p99 / step"],
+        [[*r[:4], r[7] / base, r[10] / base] for r in rows],
     )
     return rows
 
@@ -240,8 +272,9 @@ def main() -> None:
     parser.add_argument("--workers", type=int, nargs="+", default=[0, 2])
     parser.add_argument("--method", default="samba", help="reconstruction method")
     parser.add_argument("--labels", nargs="+", default=["server", "nodes"], choices=LABELLERS)
+    parser.add_argument("--phases", nargs="+", default=list(PHASES), choices=PHASES)
     args = parser.parse_args()
-    bench(args.seconds, args.sessions, args.workers, args.method, args.labels)
+    bench(args.seconds, args.sessions, args.workers, args.method, args.labels, args.phases)
 
 
 if __name__ == "__main__":

@@ -76,12 +76,12 @@ bench_service = _bench("bench_service")
 
 
 def test_service_benchmark_prints_its_latency_table(capsys: pytest.CaptureFixture[str]) -> None:
-    (row,) = bench_service.bench(1.0, [1], [1], "samba", ["server"])
+    (row,) = bench_service.bench(1.0, [2], [1], "samba", ["server"], ["independent"])
     out = capsys.readouterr().out
     assert "Baseline, same run: Reconstructor.step (samba)" in out and "e2e p99" in out
-    # 60 frames x 2 cameras in, every frame out, received
-    assert row[:6] == ["server", 1, 1, 120, 0, 0]
-    assert all(isinstance(v, float) and v > 0 for v in row[6:11])
+    # 2 sessions x 60 frames x 2 cameras in, every frame out, received
+    assert row[:7] == ["server", "independent", 2, 1, 240, 0, 0]
+    assert all(isinstance(v, float) and v > 0 for v in row[7:12])
 
 
 bench_silhouette = _bench("bench_silhouette")
