@@ -23,10 +23,12 @@ when one explanation fits and no other comes near:
   comes near uses any of its blobs, and no other label lost in its new cameras projects
   as near the blob (within `ambiguity_px`).
 
-A label is also dropped from a camera's output (not from its tracker) when its views
-disagree (`_disagreeing`: a tracker that put it on another marker's blob), or when a marker lost
-in that camera, but triangulated from the others or lost for at most `FRESH_FRAMES`,
-projects within `ambiguity_px` of its blob: the blob is probably both markers merged.
+A label is also dropped from a camera's output when its views disagree
+(`_disagreeing`: a tracker that put it on another marker's blob; where the view meets
+none of the label's other views while two of those meet, `outvoted` names it, and the
+stage takes the tracker off that blob), or when a marker lost in that camera, but
+triangulated from the others or lost for at most `FRESH_FRAMES`, projects within
+`ambiguity_px` of its blob: the blob is probably both markers merged.
 
 The prediction of a label is its last 3D position, moved with its `FOLLOWS` neighbour on
 the body (as the tracker's searching labels are) while that neighbour is triangulated;
@@ -135,6 +137,10 @@ class CrossViewLabeller:
             [standing * np.array(SHORTEST_SPAN), standing + self.settings.span_slack_m], axis=-1
         )
         self._lost = np.zeros(N_MARKERS, dtype=np.int64)
+        self.outvoted = np.zeros((len(cameras), N_MARKERS), dtype=bool)
+        """(c, 8) bool: the labels the last `step` dropped because their view meets none
+        of the marker's other views while two of those meet (`_outvoted`): that
+        camera's tracker follows a wrong blob."""
 
     def predicted(self, current: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each label's position (8, 3) meters in this frame and its 3D gate (8,) meters,
@@ -189,7 +195,9 @@ class CrossViewLabeller:
         fresh = np.where((self._lost <= FRESH_FRAMES)[:, None], prediction, np.nan)
         positions = np.where(np.isnan(current), fresh, current)
         self._remember(current, prediction)
-        labelled[self._merged(labelled, positions) | self._disagreeing(labelled)] = np.nan
+        self.outvoted = self._outvoted(labelled)
+        dropped = self._merged(labelled, positions) | self._disagreeing(labelled)
+        labelled[dropped | self.outvoted] = np.nan
         return labelled, found
 
     def _triangulate(self, raw: np.ndarray, gate_px: float | None = None) -> Triangulation:
@@ -258,6 +266,29 @@ class CrossViewLabeller:
         off = seen & (~result.views | (result.view_error > limit))
         pair = result.views.sum(axis=0) == 2
         return off | (seen & (pair & off.any(axis=0))[None, :])
+
+    def _outvoted(self, labelled: np.ndarray) -> np.ndarray:
+        """Labels (c, 8) bool whose view meets none of the label's other views (within
+        `RIVAL_ERROR_FACTOR` times `epipolar_px`, two views at a time) while two of those
+        others meet: that camera's tracker is on a wrong blob. A view that meets one other
+        view is not outvoted, even if two others meet elsewhere (one pair may be a ghost)."""
+        c = len(self.cameras)
+        pairs = list(combinations(range(c), 2))
+        outvoted = np.zeros((c, N_MARKERS), dtype=bool)
+        if c < 3:
+            return outvoted
+        views = np.full((c, len(pairs), N_MARKERS, 2), np.nan)
+        for p, (a, b) in enumerate(pairs):
+            views[a, p], views[b, p] = labelled[a], labelled[b]
+        error = self._triangulate(views.reshape(c, -1, 2)).view_error.reshape(c, len(pairs), -1)
+        with np.errstate(invalid="ignore"):
+            close = error <= RIVAL_ERROR_FACTOR * self._tolerance[:, None, None]
+        met = np.stack([close[a, p] & close[b, p] for p, (a, b) in enumerate(pairs)])  # (P, 8)
+        seen = ~np.isnan(labelled).any(axis=-1)
+        for camera in range(c):
+            own = np.array([camera in pair for pair in pairs])
+            outvoted[camera] = seen[camera] & ~met[own].any(axis=0) & met[~own].any(axis=0)
+        return outvoted
 
     def _merged(self, labelled: np.ndarray, positions: np.ndarray) -> np.ndarray:
         """Labels (c, 8) bool whose blob is probably two markers merged: a marker lost in

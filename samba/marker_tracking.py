@@ -202,6 +202,16 @@ class MarkerTracker:
         self._position[label] = self._last_seen[label] = pixel
         self._lost[label] = 0
 
+    def release(self, label: int) -> None:
+        """Take `label` (marker index) off its blob: found wrong by other means (its other
+        cameras' views meet elsewhere). It searches from the next frame on, as a label
+        lost for longer than `coast_frames`, until it is found again (by elimination
+        or `reacquire`) or abandoned."""
+        if not 0 <= label < N_MARKERS:
+            raise InputError("label", f"must be a marker index 0..{N_MARKERS - 1}, got {label}")
+        self._velocity[label] = 0.0
+        self._lost[label] = max(self._lost[label], self.settings.coast_frames + 1)
+
     def step(self, centroids: np.ndarray) -> np.ndarray:
         """The labels' pixels (8, 2) in this frame from its blob centroids (m, 2), NaN =
         missing (lost or ambiguous)."""

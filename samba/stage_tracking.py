@@ -3,7 +3,10 @@
 `StageTracker` steps one `samba.marker_tracking.MarkerTracker` per camera on that
 camera's blobs and then, unless cross-view labelling is off, the
 `samba.cross_view_labels.CrossViewLabeller`, handing the labels it finds back to the
-trackers. The offline camera chain (`samba.camera_chain`) and the live server's
+trackers and taking a tracker off a blob where two other cameras see that label
+elsewhere (`MarkerTracker.release`): a tracker that followed a marker's blob after its
+own marker was hidden would otherwise keep the wrong label once those views are lost.
+The offline camera chain (`samba.camera_chain`) and the live server's
 labelling (`service.frame_pipeline`) both run it once per frame.
 
 It starts either from the standard pose where the subject stands (`from_standard_pose`),
@@ -163,6 +166,8 @@ class StageTracker:
         labelled, found = self._labeller.step(labelled, unlabelled)
         for event in found:
             self.trackers[event.camera].reacquire(event.label, event.pixel)
+        for camera, label in zip(*np.nonzero(self._labeller.outvoted), strict=True):
+            self.trackers[camera].release(int(label))
         seen = (~np.isnan(labelled).any(axis=-1)).sum(axis=0) >= 2
         if self._search is not None and seen.sum() < MIN_TRIANGULATED:
             return self._search_again(centroids, labelled)

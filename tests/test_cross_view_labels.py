@@ -14,7 +14,7 @@ from samba.skeleton import markers_of, standing_pose
 from samba.synthetic import generate
 from samba.synthetic_cameras import with_size
 
-L_WRIST, R_WRIST = 2, 3
+L_WRIST, R_WRIST, L_KNEE, L_FOOT = 2, 3, 4, 6
 
 
 @pytest.fixture
@@ -81,6 +81,45 @@ def test_two_blobs_on_the_epipolar_line_leave_the_label_lost(markers: np.ndarray
     out, found = labeller.step(labelled, unlabelled)
     assert found == []
     assert np.isnan(out[1, L_WRIST]).all()
+
+
+def test_a_view_the_other_two_outvote_is_dropped_and_named(markers: np.ndarray) -> None:
+    cameras = _group(markers, 3)
+    labeller = CrossViewLabeller(cameras, markers)
+    pixels = cameras.project(markers)
+    labelled = pixels.copy()
+    labelled[0, L_WRIST] = pixels[0, L_FOOT]  # camera 0's tracker took the foot's blob
+    labelled[0, L_FOOT] = np.nan
+    out, _ = labeller.step(labelled, [np.zeros((0, 2))] * 3)
+    assert np.isnan(out[0, L_WRIST]).all()
+    expected = np.zeros((3, 8), dtype=bool)
+    expected[0, L_WRIST] = True
+    np.testing.assert_array_equal(labeller.outvoted, expected)
+
+
+def test_a_view_meeting_one_other_is_not_outvoted(markers: np.ndarray) -> None:
+    # camera 0's wrong view meets camera 2's within the tolerance (a near ghost): the
+    # right views of cameras 1 and 2 do not outvote it, lest a right view be released
+    cameras = _group(markers, 3)
+    labeller = CrossViewLabeller(cameras, markers)
+    pixels = cameras.project(markers)
+    labelled = pixels.copy()
+    labelled[0, L_WRIST] = pixels[0, L_KNEE]
+    labelled[0, L_KNEE] = np.nan
+    labeller.step(labelled, [np.zeros((0, 2))] * 3)
+    assert not labeller.outvoted.any()
+
+
+def test_two_disagreeing_views_are_dropped_but_neither_is_outvoted(markers: np.ndarray) -> None:
+    cameras = _group(markers, 2)
+    labeller = CrossViewLabeller(cameras, markers)
+    pixels = cameras.project(markers)
+    labelled = pixels.copy()
+    labelled[0, L_WRIST] = pixels[0, L_KNEE]
+    labelled[0, L_KNEE] = np.nan
+    out, _ = labeller.step(labelled, [np.zeros((0, 2))] * 2)
+    assert np.isnan(out[:, L_WRIST]).all()  # one of the two is wrong: which, no view says
+    assert not labeller.outvoted.any()
 
 
 def _lost_for_a_while(labeller: CrossViewLabeller, pixels: np.ndarray, labels: list[int]) -> None:

@@ -136,6 +136,24 @@ def test_an_abandoned_label_comes_back_only_through_reacquire() -> None:
     assert _wrong(rest, truth[50:]) == 0
 
 
+def test_a_released_label_lets_go_of_its_blob_until_reacquired() -> None:
+    truth = _sway(30)
+    hidden = np.zeros((30, 8), bool)
+    hidden[10:, L_KNEE + 1] = True  # the right knee is gone: no finding by elimination
+    blobs = _blobs(truth, hidden)
+    tracker = MarkerTracker(BASE)
+    tracker.track(blobs[:10])
+    tracker.release(L_KNEE)  # another camera's views say this blob is not the left knee
+    after = tracker.track(blobs[10:20])
+    assert np.isnan(after[:, L_KNEE]).all()
+    assert tracker.lost_frames[L_KNEE] > tracker.settings.coast_frames
+    assert any(np.allclose(b, truth[19, L_KNEE]) for b in tracker.anonymous_blobs)
+    tracker.reacquire(L_KNEE, truth[19, L_KNEE])
+    rest = tracker.track(blobs[20:])
+    assert np.allclose(rest[:, L_KNEE], truth[20:, L_KNEE])
+    assert _wrong(np.concatenate([after, rest]), truth[10:]) == 0
+
+
 def test_the_start_may_be_off_by_a_few_pixels() -> None:
     truth = _sway(10)
     start = BASE + np.random.default_rng(1).uniform(-2.5, 2.5, BASE.shape)
@@ -176,5 +194,7 @@ def test_bad_inputs_raise_input_errors() -> None:
         tracker.step(np.array([[np.nan, 1.0]]))
     with pytest.raises(InputError, match="label"):
         tracker.reacquire(8, (1.0, 2.0))
+    with pytest.raises(InputError, match="label"):
+        tracker.release(-1)
     with pytest.raises(InputError, match="l_wrist"):
         tracker.reacquire(L_WRIST, (np.inf, 2.0))

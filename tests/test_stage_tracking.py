@@ -1,0 +1,35 @@
+"""The labels of every camera of a stage at once (`samba.stage_tracking.StageTracker`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from samba.camera import CameraGroup
+from samba.cross_view_labels import CrossViewSettings
+from samba.observation import spread_cameras
+from samba.skeleton import markers_of, standing_pose
+from samba.stage_tracking import StageTracker
+from samba.synthetic_cameras import with_size
+
+L_WRIST, L_FOOT = 2, 6
+
+
+def test_a_tracker_on_a_wrong_blob_is_taken_off_it_and_given_the_right_one() -> None:
+    # Camera 0's tracker holds the left wrist's label on the left foot's blob (it kept
+    # following a blob after its own marker was hidden); cameras 1 and 2 see the wrist
+    # where it is. The stage takes camera 0's tracker off the foot, and the cross-view
+    # labelling gives it the wrist's own blob.
+    poses = np.repeat(standing_pose()[None], 2, axis=0)
+    cameras = CameraGroup(tuple(with_size(c, (640, 480)) for c in spread_cameras(poses, 3)))
+    pixels = cameras.project(markers_of(standing_pose()))  # (3, 8, 2)
+    start = pixels.copy()
+    start[0, L_WRIST] = pixels[0, L_FOOT]
+    start[0, L_FOOT] = np.nan
+    stage = StageTracker.from_labels(cameras, start, cross_view=CrossViewSettings())
+    blobs = list(pixels)
+    first = stage.step(blobs)
+    assert np.isnan(first[0, L_WRIST]).all()
+    assert stage.trackers[0].lost_frames[L_WRIST] > stage.trackers[0].settings.coast_frames
+    later = [stage.step(blobs) for _ in range(3)][-1]
+    np.testing.assert_allclose(later[0, L_WRIST], pixels[0, L_WRIST])
+    assert not np.isnan(later[1:]).any()
