@@ -195,9 +195,9 @@ class CrossViewLabeller:
         fresh = np.where((self._lost <= FRESH_FRAMES)[:, None], prediction, np.nan)
         positions = np.where(np.isnan(current), fresh, current)
         self._remember(current, prediction)
-        self.outvoted = self._outvoted(labelled)
-        dropped = self._merged(labelled, positions) | self._disagreeing(labelled)
-        labelled[dropped | self.outvoted] = np.nan
+        disagreeing = self._disagreeing(labelled)
+        self.outvoted = self._outvoted(labelled, disagreeing.any(axis=0))
+        labelled[self._merged(labelled, positions) | disagreeing | self.outvoted] = np.nan
         return labelled, found
 
     def _triangulate(self, raw: np.ndarray, gate_px: float | None = None) -> Triangulation:
@@ -267,27 +267,29 @@ class CrossViewLabeller:
         pair = result.views.sum(axis=0) == 2
         return off | (seen & (pair & off.any(axis=0))[None, :])
 
-    def _outvoted(self, labelled: np.ndarray) -> np.ndarray:
-        """Labels (c, 8) bool whose view meets none of the label's other views (within
-        `RIVAL_ERROR_FACTOR` times `epipolar_px`, two views at a time) while two of those
-        others meet: that camera's tracker is on a wrong blob. A view that meets one other
-        view is not outvoted, even if two others meet elsewhere (one pair may be a ghost)."""
+    def _outvoted(self, labelled: np.ndarray, disagree: np.ndarray) -> np.ndarray:
+        """Labels (c, 8) bool, of the markers whose views `disagree` (8,) bool, whose view
+        meets none of the marker's other views (within `RIVAL_ERROR_FACTOR` times
+        `epipolar_px`, two views at a time) while two of those others meet: that
+        camera's tracker is on a wrong blob. A view that meets one other view is not
+        outvoted, even if two others meet elsewhere (one pair may be a ghost)."""
         c = len(self.cameras)
-        pairs = list(combinations(range(c), 2))
         outvoted = np.zeros((c, N_MARKERS), dtype=bool)
-        if c < 3:
+        markers = np.flatnonzero(disagree)
+        if c < 3 or not len(markers):
             return outvoted
-        views = np.full((c, len(pairs), N_MARKERS, 2), np.nan)
+        pairs = list(combinations(range(c), 2))
+        views = np.full((c, len(pairs), len(markers), 2), np.nan)
         for p, (a, b) in enumerate(pairs):
-            views[a, p], views[b, p] = labelled[a], labelled[b]
+            views[a, p], views[b, p] = labelled[a, markers], labelled[b, markers]
         error = self._triangulate(views.reshape(c, -1, 2)).view_error.reshape(c, len(pairs), -1)
         with np.errstate(invalid="ignore"):
             close = error <= RIVAL_ERROR_FACTOR * self._tolerance[:, None, None]
-        met = np.stack([close[a, p] & close[b, p] for p, (a, b) in enumerate(pairs)])  # (P, 8)
-        seen = ~np.isnan(labelled).any(axis=-1)
+        met = np.stack([close[a, p] & close[b, p] for p, (a, b) in enumerate(pairs)])  # (P, m)
+        seen = ~np.isnan(labelled[:, markers]).any(axis=-1)
         for camera in range(c):
             own = np.array([camera in pair for pair in pairs])
-            outvoted[camera] = seen[camera] & ~met[own].any(axis=0) & met[~own].any(axis=0)
+            outvoted[camera, markers] = seen[camera] & ~met[own].any(axis=0) & met[~own].any(axis=0)
         return outvoted
 
     def _merged(self, labelled: np.ndarray, positions: np.ndarray) -> np.ndarray:

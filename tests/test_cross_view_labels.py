@@ -83,14 +83,24 @@ def test_two_blobs_on_the_epipolar_line_leave_the_label_lost(markers: np.ndarray
     assert np.isnan(out[1, L_WRIST]).all()
 
 
-def test_a_view_the_other_two_outvote_is_dropped_and_named(markers: np.ndarray) -> None:
-    cameras = _group(markers, 3)
+def _wrist_on_blob_of(
+    markers: np.ndarray, count: int, other: int
+) -> tuple[CrossViewLabeller, np.ndarray]:
+    """A labeller of `count` cameras after one frame in which camera 0's tracker put the
+    left wrist's label on marker `other`'s blob (and lost `other`); the others are right.
+    Returns the labeller and the frame's output labels (c, 8, 2)."""
+    cameras = _group(markers, count)
     labeller = CrossViewLabeller(cameras, markers)
     pixels = cameras.project(markers)
     labelled = pixels.copy()
-    labelled[0, L_WRIST] = pixels[0, L_FOOT]  # camera 0's tracker took the foot's blob
-    labelled[0, L_FOOT] = np.nan
-    out, _ = labeller.step(labelled, [np.zeros((0, 2))] * 3)
+    labelled[0, L_WRIST] = pixels[0, other]
+    labelled[0, other] = np.nan
+    out, _ = labeller.step(labelled, [np.zeros((0, 2))] * count)
+    return labeller, out
+
+
+def test_a_view_the_other_two_outvote_is_dropped_and_named(markers: np.ndarray) -> None:
+    labeller, out = _wrist_on_blob_of(markers, 3, L_FOOT)
     assert np.isnan(out[0, L_WRIST]).all()
     expected = np.zeros((3, 8), dtype=bool)
     expected[0, L_WRIST] = True
@@ -100,24 +110,12 @@ def test_a_view_the_other_two_outvote_is_dropped_and_named(markers: np.ndarray) 
 def test_a_view_meeting_one_other_is_not_outvoted(markers: np.ndarray) -> None:
     # camera 0's wrong view meets camera 2's within the tolerance (a near ghost): the
     # right views of cameras 1 and 2 do not outvote it, lest a right view be released
-    cameras = _group(markers, 3)
-    labeller = CrossViewLabeller(cameras, markers)
-    pixels = cameras.project(markers)
-    labelled = pixels.copy()
-    labelled[0, L_WRIST] = pixels[0, L_KNEE]
-    labelled[0, L_KNEE] = np.nan
-    labeller.step(labelled, [np.zeros((0, 2))] * 3)
+    labeller, _ = _wrist_on_blob_of(markers, 3, L_KNEE)
     assert not labeller.outvoted.any()
 
 
 def test_two_disagreeing_views_are_dropped_but_neither_is_outvoted(markers: np.ndarray) -> None:
-    cameras = _group(markers, 2)
-    labeller = CrossViewLabeller(cameras, markers)
-    pixels = cameras.project(markers)
-    labelled = pixels.copy()
-    labelled[0, L_WRIST] = pixels[0, L_KNEE]
-    labelled[0, L_KNEE] = np.nan
-    out, _ = labeller.step(labelled, [np.zeros((0, 2))] * 2)
+    labeller, out = _wrist_on_blob_of(markers, 2, L_KNEE)
     assert np.isnan(out[:, L_WRIST]).all()  # one of the two is wrong: which, no view says
     assert not labeller.outvoted.any()
 
