@@ -23,9 +23,9 @@ class LiveRetarget:
     Rotations equal `retarget(poses, rig, fps).rotations` of the whole stream so far
     (within 1e-9), signs included: each step's quaternions lie in the hemisphere of the
     previous step's. Only frames already seen matter there: a nearly straight limb keeps
-    the bend axis of its last fully bent frame, so per limb the pose of that frame is
-    kept, and each step runs `local_rotations` over those kept poses (at most 4) and the
-    current one, with the rig's `rest_frames` computed once.
+    the bend axis of its last fully bent frame, which `local_rotations` carries from
+    step to step (the limbs' axes in their parents' frames), so each step runs it on the
+    current pose alone, with the rig's `rest_frames` computed once.
 
     The root scale is `rig.leg_length / leg_length` as in `retarget`, with the subject's
     `leg_length` (meters) as given or, if None, the median leg length (see
@@ -50,8 +50,7 @@ class LiveRetarget:
     def reset(self) -> None:
         """Start a new stream: forget the bent frames, the quaternion signs and the
         estimated leg length (a leg length given to the constructor stays)."""
-        self._frame = 0
-        self._last_bent: dict[int, tuple[int, np.ndarray]] = {}
+        self._carried: np.ndarray | None = None
         self._previous: np.ndarray | None = None
         self._settling: list[np.ndarray] = []
         self._leg_length = self._given_leg_length
@@ -73,20 +72,10 @@ class LiveRetarget:
             raise ValueError(f"LiveRetarget.step needs a pose of shape (13, 3), got {pose.shape}")
         if not np.isfinite(pose).all():
             raise ValueError("LiveRetarget.step needs a finite pose (drop frames with NaN first)")
-        # Over the whole take, a limb's axis at this frame depends only on this frame and on
-        # the limb's last fully bent frame k, each taken alone (all else `local_rotations`
-        # computes is per frame, up to float rounding). The window holds k of every limb,
-        # in time order. Any window frame after k is another limb's last bent frame, seen
-        # between k and now, so it is not bent for this limb (k is its last bent one): the
-        # carry over the window picks k again. A limb never bent yet is bent in no window
-        # frame either, and falls back to the reference axis as over the take.
-        kept = {frame: kept_pose for frame, kept_pose in self._last_bent.values()}
-        window = np.stack([kept[frame] for frame in sorted(kept)] + [pose])
-        rotations, bent = local_rotations(window, self._rig, self._rest_frames)
-        for limb in np.flatnonzero(bent[-1]):
-            self._last_bent[int(limb)] = (self._frame, pose)
-        self._frame += 1
-        current = rotations[-1]
+        rotations, _, self._carried = local_rotations(
+            pose[None], self._rig, self._rest_frames, self._carried
+        )
+        current = rotations[0]
         if self._previous is not None:
             current = continuous_quaternions(np.stack([self._previous, current]))[1]
         self._previous = current

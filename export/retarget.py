@@ -138,7 +138,7 @@ def retarget(poses: np.ndarray, rig: HumanoidRig, fps: float) -> HumanoidMotion:
         raise ValueError(f"retarget needs poses of shape (n, 13, 3), got {poses.shape}")
     if not np.isfinite(poses).all():
         raise ValueError("retarget needs finite poses (fill or drop frames with NaN first)")
-    rotations, _ = local_rotations(poses, rig)
+    rotations, _, _ = local_rotations(poses, rig)
     root = root_positions(poses, rig, leg_length(poses))
     return HumanoidMotion(rig=rig, rotations=rotations, root=root, fps=fps)
 
@@ -155,7 +155,7 @@ def rest_frames(rig: HumanoidRig) -> np.ndarray:
     frames = np.tile(np.eye(3), (N_BONES, 1, 1))
     frames[_TORSO_BONES] = _frame(_lines(rest, _TORSO_PRIMARY), _lines(rest, _TORSO_SECONDARY))
     frames[1] = _frame(rest[2] - rest[1], rest[11] - rest[14])
-    axes, _ = _bend_axis(
+    axes, _, _ = _bend_axis(
         (rest[_LOWER] - rest[_UPPER])[None],
         (rest[_END] - rest[_LOWER])[None],
         np.broadcast_to(np.eye(3), (1, len(_LIMBS), 3, 3)),
@@ -168,24 +168,30 @@ def rest_frames(rig: HumanoidRig) -> np.ndarray:
 
 
 def local_rotations(
-    poses: np.ndarray, rig: HumanoidRig, frames: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
+    poses: np.ndarray,
+    rig: HumanoidRig,
+    frames: np.ndarray | None = None,
+    carried: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Local bone rotations of `rig` for finite captured poses (n, 13, 3) in meters, and
     which frames the limbs are bent in; `frames` are the rig's `rest_frames`, computed
-    here if not given.
+    here if not given. `carried` continues a take retargeted in earlier calls: the limb
+    axes the last call returned (None: the take starts here).
 
     Returns `rotations` (n, 17, 4), quaternions (x, y, z, w) with each frame's sign as
     scipy's `Rotation.from_matrix` gives it (`HumanoidMotion` makes them
-    hemisphere-continuous), and `bent` (n, 4) bool, one column per limb (left arm, right
+    hemisphere-continuous); `bent` (n, 4) bool, one column per limb (left arm, right
     arm, left leg, right leg): the frames whose limb plane alone gives the bend axis,
-    which nearly straight later frames of that limb carry along.
+    which nearly straight later frames of that limb carry along; and the limb axes to
+    carry on (4, 3, 2): each limb's direction and bend axis in its parent's frame at its
+    last bent frame so far (NaN for a limb not bent yet).
     """
     if frames is None:
         frames = rest_frames(rig)
-    world, bent = _world_rotations(capture_points(poses), rig.rest, frames)
+    world, bent, carried = _world_rotations(capture_points(poses), rig.rest, frames, carried)
     local = world.copy()
     local[:, 1:] = world[:, _PARENTS[1:]].swapaxes(-1, -2) @ world[:, 1:]
-    return _quaternions(local), bent
+    return _quaternions(local), bent, carried
 
 
 def root_positions(poses: np.ndarray, rig: HumanoidRig, subject_leg_length: float) -> np.ndarray:
@@ -197,11 +203,11 @@ def root_positions(poses: np.ndarray, rig: HumanoidRig, subject_leg_length: floa
 
 
 def _world_rotations(
-    capture: np.ndarray, rest: np.ndarray, frames: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+    capture: np.ndarray, rest: np.ndarray, frames: np.ndarray, carried: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World rotations (n, 17, 3, 3) taking the rig's rest bones (`rest` (17, 3), its
-    `rest_frames` `frames`) to the captured ones (n, 17, 3), and whether each of `_LIMBS`
-    is fully bent (n, 4) bool."""
+    `rest_frames` `frames`) to the captured ones (n, 17, 3), whether each of `_LIMBS` is
+    fully bent (n, 4) bool, and the limb axes carried on (`_bend_axis`)."""
     world = np.empty((len(capture), N_BONES, 3, 3))
     world[:, _TORSO_BONES] = (
         _frame(_lines(capture, _TORSO_PRIMARY), _lines(capture, _TORSO_SECONDARY))
@@ -209,7 +215,9 @@ def _world_rotations(
     )
     segments = capture[:, _SEGMENT_ENDS] - capture[:, _SEGMENTS]  # upper ones, lower ones
     limbs = len(_LIMBS)
-    axes, bent = _bend_axis(segments[:, :limbs], segments[:, limbs:], world[:, _LIMB_PARENT])
+    axes, bent, carried = _bend_axis(
+        segments[:, :limbs], segments[:, limbs:], world[:, _LIMB_PARENT], carried
+    )
     spine, lateral = _spine_directions(
         world[:, 0], world[:, 2], capture[:, 3] - capture[:, 0], rest
     )
@@ -223,7 +231,7 @@ def _world_rotations(
     world[:, _AFTER_TORSO] = _frame(primary, secondary) @ frames[_AFTER_TORSO]
     world[:, _FOLLOWERS] = world[:, _PARENTS[_FOLLOWERS]]
     world[:, _FEET] = _feet(world[:, _FEET], world[:, _SHINS], horizontal)
-    return world, bent
+    return world, bent, carried
 
 
 def _spine_directions(
@@ -242,17 +250,19 @@ def _spine_directions(
 
 
 def _bend_axis(
-    upper: np.ndarray, lower: np.ndarray, parent: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+    upper: np.ndarray, lower: np.ndarray, parent: np.ndarray, carried: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unit bend axes (n, 4, 3) of the `_LIMBS` with segments `upper`, `lower` (n, 4, 3)
-    over a take, and which frames are fully bent (n, 4) bool (their plane alone gives the
-    axis).
+    over a take, which frames are fully bent (n, 4) bool (their plane alone gives the
+    axis), and the axes to carry on (4, 3, 2): each limb's direction and bend axis
+    (columns) in its parent's frame at its last bent frame, NaN where none yet.
 
     Where a limb is bent, the limb plane's normal. Where it is nearly straight, the axis
     of its last bent frame, carried along with its parent (`parent` (n, 4, 3, 3) world
-    rotations) and swung with the limb, or before any bent frame the reference axis
-    swung from the reference direction; in between the two turn into each other about
-    the limb. Only earlier frames are used, so a live stream gets the same axes.
+    rotations) and swung with the limb, or before any bent frame (of this call, or the
+    `carried` axes of earlier calls of the take) the reference axis swung from the
+    reference direction; in between the two turn into each other about the limb. Only
+    earlier frames are used, so a live stream gets the same axes.
     """
     u = _unit(upper)
     plane = _cross(u, _unit(lower))
@@ -265,13 +275,18 @@ def _bend_axis(
     # The limb direction and bend axis (columns) in the parent's frame, of the last bent
     # frame or else the reference ones, turned with the parent and swung onto the limb.
     in_parent = parent.swapaxes(-1, -2) @ np.stack([u, plane], axis=-1)
-    kept = in_parent[np.maximum(last_bent, 0), np.arange(len(_LIMBS))]
-    moved = parent @ np.where((last_bent >= 0)[..., None, None], kept, _REFERENCE_AXES)
+    limbs = np.arange(len(_LIMBS))
+    kept = in_parent[np.maximum(last_bent, 0), limbs]
+    if carried is None:
+        carried = np.full((len(_LIMBS), 3, 2), np.nan)
+    before = np.where(np.isnan(carried), _REFERENCE_AXES, carried)
+    moved = parent @ np.where((last_bent >= 0)[..., None, None], kept, before)
     fallback = _swing(_unit(moved[..., 0]), u, moved[..., 1])
     fallback = _unit(fallback - _dot(fallback, u) * u)
     angle = np.arctan2(_dot(u, _cross(fallback, plane)), _dot(fallback, plane))
     turn = w * angle
-    return fallback * np.cos(turn) + _cross(u, fallback) * np.sin(turn), bent
+    carry = np.where((last_bent[-1] >= 0)[:, None, None], kept[-1], carried)
+    return fallback * np.cos(turn) + _cross(u, fallback) * np.sin(turn), bent, carry
 
 
 def _swing(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:

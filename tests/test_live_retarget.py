@@ -48,7 +48,7 @@ def test_streamed_rotations_and_roots_equal_the_whole_take(
     rig: HumanoidRig, kind: str, seed: int
 ) -> None:
     take = generate(kind, seed=seed, seconds=4.0)
-    _, bent = local_rotations(take.poses, rig)
+    _, bent, _ = local_rotations(take.poses, rig)
     carried = np.maximum.accumulate(bent, axis=0) & ~bent
     assert carried.any(), "the take should have straight limbs carrying a bent frame's axis"
     offline = retarget(take.poses, rig, take.fps)
@@ -60,13 +60,28 @@ def test_streamed_rotations_and_roots_equal_the_whole_take(
 @pytest.mark.parametrize("rig", [T_POSE, A_POSE_SMALL], ids=["t-pose", "a-pose-small"])
 def test_local_rotations_take_given_rest_frames_and_scipys_signs(rig: HumanoidRig) -> None:
     take = generate("kick", seed=2, seconds=3.0)
-    rotations, bent = local_rotations(take.poses, rig)
-    given, given_bent = local_rotations(take.poses, rig, rest_frames(rig))
+    rotations, bent, _ = local_rotations(take.poses, rig)
+    given, given_bent, _ = local_rotations(take.poses, rig, rest_frames(rig))
     np.testing.assert_array_equal(given, rotations)
     np.testing.assert_array_equal(given_bent, bent)
     matrices = Rotation.from_quat(rotations.reshape(-1, 4)).as_matrix()
     scipy_quaternions = Rotation.from_matrix(matrices).as_quat().reshape(rotations.shape)
     np.testing.assert_allclose(rotations, scipy_quaternions, rtol=0, atol=1e-12)
+
+
+def test_a_take_retargeted_in_pieces_carries_the_limb_axes_across() -> None:
+    # The arm swing keeps straight arms for stretches after bent frames: a piece that
+    # starts straight must take its axes from the bent frames of the piece before.
+    take = generate("arm_swing", seed=3, seconds=4.0)
+    whole, bent, carried = local_rotations(take.poses, T_POSE)
+    pieces, carry = [], None
+    for piece in np.array_split(take.poses, 7):
+        rotations, _, carry = local_rotations(piece, T_POSE, carried=carry)
+        pieces.append(rotations)
+    np.testing.assert_allclose(np.concatenate(pieces), whole, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(carry, carried)
+    assert bent[:, :2].any(axis=0).all()  # both arms bend at times
+    np.testing.assert_array_equal(np.isnan(carried).all(axis=(1, 2)), ~bent.any(axis=0))
 
 
 def test_the_root_scale_settles_on_the_first_frames() -> None:
