@@ -187,8 +187,7 @@ class MarkerTracker:
         means (another camera's view): one of `anonymous_blobs`, whose track (and
         velocity) it takes over, or any point, where it starts at rest."""
         pixel = np.asarray(pixel, dtype=np.float64)
-        if not 0 <= label < N_MARKERS:
-            raise InputError("label", f"must be a marker index 0..{N_MARKERS - 1}, got {label}")
+        _check_label(label)
         if pixel.shape != (2,) or not np.isfinite(pixel).all():
             raise InputError(MARKER_NAMES[label], f"pixel must be finite (u, v), got {pixel}")
         same = np.linalg.norm(self._anonymous - pixel, axis=-1) < 1e-6
@@ -207,8 +206,7 @@ class MarkerTracker:
         cameras' views meet elsewhere). It searches from the next frame on, as a label
         lost for longer than `coast_frames`, until it is found again (by elimination
         or `reacquire`) or abandoned."""
-        if not 0 <= label < N_MARKERS:
-            raise InputError("label", f"must be a marker index 0..{N_MARKERS - 1}, got {label}")
+        _check_label(label)
         self._velocity[label] = 0.0
         self._lost[label] = max(self._lost[label], self.settings.coast_frames + 1)
 
@@ -321,6 +319,12 @@ class MarkerTracker:
 def _distances(points: np.ndarray, blobs: np.ndarray) -> np.ndarray:
     """Pairwise distances (n, m) between points (n, 2) and blobs (m, 2), pixels."""
     return np.hypot(points[:, None, 0] - blobs[None, :, 0], points[:, None, 1] - blobs[None, :, 1])
+
+
+def _check_label(label: int) -> None:
+    """`InputError` unless `label` is a marker index, 0..7."""
+    if not 0 <= label < N_MARKERS:
+        raise InputError("label", f"must be a marker index 0..{N_MARKERS - 1}, got {label}")
 
 
 def _nearest_assignment(
