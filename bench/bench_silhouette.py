@@ -1,6 +1,6 @@
 """Single-camera silhouette tracking: accuracy, the paper's Figure 4, speed and tree size.
 
-Run from the project root:  python bench/bench_silhouette.py [--takes 3] [--reps 2]
+Run from the project root:  python bench/bench_silhouette.py [--takes 3] [--reps 6]
                             [--sequences 24] [--large-headings 15] [--tables 1 2 3]
 
 One camera, 320x240 silhouettes, the men's M body model (1.75 m); held-out takes of the
@@ -57,6 +57,7 @@ from samba.silhouette_evaluation import (  # noqa: E402
 from samba.silhouette_runs import RowSums  # noqa: E402
 from samba.silhouette_tracker import TrackerSettings  # noqa: E402
 from samba.silhouette_view import SilhouetteView  # noqa: E402
+from samba.skeleton import mirror_poses  # noqa: E402
 from samba.synthetic import generate, library  # noqa: E402
 
 CAMERA = Camera.look_at("front", (0.0, 1.2, 3.6), (0.0, 0.9, 0.0), (320, 240), 55.0)
@@ -68,8 +69,10 @@ PAPER_MS = {"PC": 127.0, "Cell": 86.0}
 
 
 def synthetic_tree(takes: int) -> tuple[ShapeTree, float]:
-    """The tree of `takes` takes per built-in motion (seed 1), and its build seconds."""
+    """The tree of `takes` takes per built-in motion (seed 1) and their left/right mirror
+    images (as `samba db import --mirror` stores takes), and its build seconds."""
     poses = np.concatenate([t.poses for t in library(takes, 4.0, FPS, seed=1)])
+    poses = np.concatenate([poses, mirror_poses(poses)])
     start = time.perf_counter()
     tree = ShapeTree.build(poses.astype(np.float64), SilhouetteView(CAMERA), BODY)
     return tree, time.perf_counter() - start
@@ -263,7 +266,7 @@ def main() -> None:
     """Parse the flags and run the benchmark."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--takes", type=int, default=3, help="tree: takes per motion")
-    parser.add_argument("--reps", type=int, default=2, help="held-out takes per motion")
+    parser.add_argument("--reps", type=int, default=6, help="held-out takes per motion")
     parser.add_argument("--sequences", type=int, default=24, help="Figure 4 sequences")
     parser.add_argument(
         "--large-headings", type=float, default=15.0, help="large tree: heading step, degrees"

@@ -10,7 +10,8 @@ is 45 cm, time per frame single-threaded. What differs for one camera:
   and standing, on average, at the view's home point; a take that travels (walking)
   can be held in place, as on a treadmill, so that it stays in view;
 * the observed silhouettes are the renderer's, spoilt by `noisy_silhouettes` at `noise`
-  and cleaned by `clean_silhouette`, as background subtraction gives them;
+  and cleaned by `clean_silhouette`, as background subtraction gives them (with the
+  tracker's closing radius, `samba.silhouette_extraction.TRACKING_CLOSE_VIEW_PX`);
 * a tracking failure is a frame whose MPJPE exceeds `FAILURE_CM`.
 """
 
@@ -25,7 +26,7 @@ from threadpoolctl import threadpool_limits
 from samba.body_model import scaled_to
 from samba.shape_tree import ShapeTree
 from samba.silhouette_distance import DISTANCES
-from samba.silhouette_extraction import clean_silhouette
+from samba.silhouette_extraction import clean_silhouette, tracking_close_px
 from samba.silhouette_render import noisy_silhouettes, render_silhouettes
 from samba.silhouette_tracker import SilhouetteTracker, TrackerSettings
 from samba.silhouette_view import SilhouetteView
@@ -78,7 +79,8 @@ def observed_silhouettes(
     """What background subtraction would give of the tree's body model in `poses`
     (n, 13, 3) m, seen by the tree's camera: (n, H, W) bool."""
     clean = render_silhouettes(poses, tree.view.camera, tree.body)
-    return np.stack([clean_silhouette(m) for m in noisy_silhouettes(clean, rng, noise)])
+    close = tracking_close_px(clean.shape[2], tree.view.size[0])
+    return np.stack([clean_silhouette(m, close) for m in noisy_silhouettes(clean, rng, noise)])
 
 
 @dataclass(frozen=True)

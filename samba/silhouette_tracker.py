@@ -3,20 +3,23 @@
 
 Each frame the observed silhouette is normalised (`samba.silhouette_view`) and the tree
 is evaluated once, coarse to fine: every top-level node, then the children of the
-nodes that survive on each level. A node's score is its log posterior, the log
-likelihood of Eq. 3 (a Gaussian in the silhouette distance `distance`, one of
-`samba.silhouette_distance.DISTANCES`, with a sigma per level) plus the log prior of
-Eq. 2: the previous frame's posterior (its best leaves and their weights) pushed through
-the first-order motion model of Eq. 8, a Gaussian per body part on joint positions (the
-trunk's in the world's axes, the limbs' and the head's in the body's own frame).
+nodes that survive on each level. A node's score is the log likelihood of Eq. 3 (a
+Gaussian in the silhouette distance `distance`, one of
+`samba.silhouette_distance.DISTANCES`, with a sigma per level); on the leaves it is the
+log posterior, the likelihood plus the log prior of Eq. 2: the previous frame's
+posterior (its best leaves and their weights) pushed through the first-order motion
+model of Eq. 8, a Gaussian per body part on joint positions (the trunk's in the world's
+axes, the limbs' and the head's in the body's own frame).
 Each part's Gaussian is floored `part_cap` nats below its peak: a limb that was lost can
 be found again wherever the silhouette shows it, while the trunk (whose cap is high)
 keeps the side of the body that faces the camera — a silhouette seen from the back is
-almost the one seen from the front, and only the motion model tells them apart. A node
-on an upper level stands for its leaves, so its part variances add the level's
-`spread`.
+almost the one seen from the front, and only the motion model tells them apart.
 Nodes more than `log_margin` below the best score of their level, or beyond the
-`keep` best, are pruned with their subtrees.
+`keep` best, are pruned with their subtrees, except the ancestors of the previous
+frame's posterior leaves: on a badly spoilt frame their coarse silhouettes can lose to
+others (a subject bent towards the camera to one standing, or to one bent away from it
+with its back turned), and the prior, which only the leaves carry, must be able to keep
+the track where it was.
 
 Beyond the paper's first-order model (Eq. 8), each part's Gaussian is centred
 `velocity_gain` of the last step ahead: the change between the best leaves of the two
@@ -176,6 +179,7 @@ class SilhouetteTracker:
             return self._hold(mask)
         normalised, placement = self.tree.view.normalise(mask)
         settings = self.settings
+        held = self._held_ancestors()
         nodes = np.arange(len(self.tree.levels[0]))
         evaluated = 0
         for level, size in enumerate(LEVEL_SIZES):
@@ -198,6 +202,8 @@ class SilhouetteTracker:
             order = np.argsort(scores)[::-1][: settings.keep[level]]
             order = order[scores[order] >= scores[order[0]] - settings.log_margin]
             nodes, scores, distances = nodes[order], scores[order], distances[order]
+            if level < len(held):
+                nodes = np.union1d(nodes, held[level])
         best = settings.posterior_size
         self._previous = nodes[:best]
         self._weights = np.exp(scores[:best] - logsumexp(scores[:best]))
@@ -214,6 +220,17 @@ class SilhouetteTracker:
         )
         self._last = estimate
         return estimate
+
+    def _held_ancestors(self) -> list[np.ndarray]:
+        """Per upper level, the nodes (sorted indices) above the previous posterior's
+        leaves, which pruning keeps; none before the first frame."""
+        if self._previous is None:
+            return []
+        held, nodes = [], self._previous
+        for level in range(len(self.tree.levels) - 1, 0, -1):
+            nodes = np.unique(self.tree.levels[level].parents[nodes])
+            held.insert(0, nodes)
+        return held
 
     def _mean(self, placed: np.ndarray, scores: np.ndarray) -> np.ndarray:
         """The estimate (13, 3) m from the posterior's leaves `placed` (k, 13, 3) m, best

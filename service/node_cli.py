@@ -331,7 +331,9 @@ def _open_silhouette_source(
             pace,
             loop,
         )
-        extractor = SilhouetteExtractor.learn(feed.empty_frames(EMPTY_STAGE_FRAMES))
+        extractor = SilhouetteExtractor.for_tracking(
+            feed.empty_frames(EMPTY_STAGE_FRAMES), view.size[0]
+        )
         return SilhouetteNode(tree, extractor), feed.captures()
     if source == "webcam":
         captures = WebcamFeed(args.webcam, args.fps).captures()
@@ -342,7 +344,7 @@ def _open_silhouette_source(
         empty = [frame for _, frame in open_frames(args.background).frames()]
     else:
         empty = [capture.frame for capture in itertools.islice(captures, args.empty_frames)]
-    return SilhouetteNode(tree, SilhouetteExtractor.learn(empty)), captures
+    return SilhouetteNode(tree, SilhouetteExtractor.for_tracking(empty, view.size[0])), captures
 
 
 def _camera_id(text: str) -> int:

@@ -70,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
         empty = list(sized_frames(background, args.background, camera, args.calib))
     else:
         empty = list(itertools.islice(frames, args.empty_frames))
-    extractor = SilhouetteExtractor.learn([frame for _, frame in empty], method=args.method)
+    extractor = SilhouetteExtractor.for_tracking(
+        [frame for _, frame in empty], view.size[0], method=args.method
+    )
     try:
         seconds, held = _track(frames, extractor, SilhouetteTracker(tree), out, args.fps)
     except BaseException:

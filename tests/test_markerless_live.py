@@ -98,7 +98,7 @@ def test_a_poses_session_streams_and_records_the_markerless_node(
 ) -> None:
     shot = footage()
     tree = read_shape_tree(tree_path(store, f"{CAMERA.name}-{BODY.name}"))
-    node = SilhouetteNode(tree, SilhouetteExtractor.learn(shot.empty))
+    node = SilhouetteNode(tree, SilhouetteExtractor.for_tracking(shot.empty, tree.view.size[0]))
     vmc = VmcReceiver()
 
     async def run() -> tuple[dict, list[np.ndarray]]:

@@ -8,7 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
+from samba.body_model import BodyModel
+from samba.camera import Camera
 from samba.errors import InputError
+from samba.silhouette_evaluation import staged
 from samba.silhouette_extraction import (
     BACKGROUND_METHODS,
     MIN_BACKGROUND_FRAMES,
@@ -17,7 +20,11 @@ from samba.silhouette_extraction import (
     SilhouetteExtractor,
     clean_silhouette,
     learn_background,
+    tracking_close_px,
 )
+from samba.silhouette_render import render_silhouettes
+from samba.silhouette_view import SilhouetteView
+from samba.synthetic import generate
 
 HEIGHT, WIDTH = 240, 320
 WALL = np.array([105, 118, 128], np.float32)
@@ -206,3 +213,19 @@ def test_bad_inputs_raise_typed_errors(
         with pytest.raises(InputError) as error:
             call()
         assert error.value.source == name.strip()
+
+
+def test_the_tracking_extractor_keeps_the_gaps_the_shape_tree_has() -> None:
+    # The shape tree's silhouettes are rendered, with the gaps between a walker's legs and
+    # between the arms and the trunk. The tracker's extractor closes by one pixel of its
+    # 320-wide view (2 px at 640 wide); a 3-view-pixel closing fills those gaps.
+    camera = Camera.look_at("front", (0.0, 1.2, 3.6), (0.0, 0.9, 0.0), (320, 240), 55.0)
+    walk = generate("walk", 4.0, 15.0, 2000).poses.astype(np.float64)
+    stride = staged(walk, SilhouetteView(camera), 1.75, in_place=True)[6:7]
+    rendered = render_silhouettes(stride, camera, BodyModel.for_subject(1.75))[0]
+    tracked = clean_silhouette(rendered, tracking_close_px(320, 320))
+    assert (tracked ^ rendered).sum() < 0.02 * rendered.sum()
+    assert (clean_silhouette(rendered, 3) ^ rendered).sum() > 0.08 * rendered.sum()
+    empty = np.random.default_rng(0).integers(90, 110, (5, 480, 640, 3)).astype(np.uint8)
+    assert SilhouetteExtractor.for_tracking(empty, 320).close_px == 2
+    assert [tracking_close_px(width, 320) for width in (160, 320, 1920)] == [1, 1, 6]
