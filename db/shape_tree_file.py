@@ -66,7 +66,6 @@ def write_shape_tree(path: str | Path, tree: ShapeTree) -> None:
         values = (runs.offsets, runs.starts, runs.ends, level.poses, level.floor_offsets)
         values += (level.visibility, level.parents)
         arrays.update({f"level{i}_{key}": v for key, v in zip(_LEVEL_ARRAYS, values, strict=True)})
-        arrays[f"level{i}_spread"] = level.spread
     with atomic_path(path) as tmp, open(tmp, "wb") as file:
         np.savez(file, **arrays)
 
@@ -110,7 +109,5 @@ def _tree(header: dict, arrays: dict[str, np.ndarray]) -> ShapeTree:
         runs = SilhouetteRuns(tuple(size), offsets, starts, ends)
         if len(runs) != len(poses) or runs.offsets[-1] != len(runs.starts):
             raise ValueError(f"level {i}: {len(runs)} silhouettes for {len(poses)} poses")
-        levels.append(
-            TreeLevel(runs, poses, floor_offsets, visibility, parents, arrays[f"level{i}_spread"])
-        )
+        levels.append(TreeLevel(runs, poses, floor_offsets, visibility, parents))
     return ShapeTree(view, body, tuple(levels))

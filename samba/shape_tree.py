@@ -79,16 +79,14 @@ class TreeLevel:
     """One level of the tree, m nodes: `silhouettes` (runs at the level's size), `poses`
     (m, 13, 3) float32 meters at home, `floor_offsets` (m, 3) float32 meters from the
     silhouette's anchor floor point to the pose's hip midpoint on the floor,
-    `visibility` (m, parts) float32 (`part_visibility`), `parents` (m,) int32 node index
-    on the level above (-1 on the top level) and `spread` (parts,) meters, the RMS
-    distance of a part's joints between a node's pose and its leaves' poses."""
+    `visibility` (m, parts) float32 (`part_visibility`) and `parents` (m,) int32 node
+    index on the level above (-1 on the top level)."""
 
     silhouettes: SilhouetteRuns
     poses: np.ndarray
     floor_offsets: np.ndarray
     visibility: np.ndarray
     parents: np.ndarray
-    spread: np.ndarray
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -169,7 +167,6 @@ class ShapeTree:
         top_leaders, top_of = _leader_clusters(features[middle_leaders], np.sqrt(radii[0] * area))
         leaders = (middle_leaders[top_leaders], middle_leaders, np.arange(len(leaves)))
         parents = (np.full(len(top_leaders), -1), top_of, middle_of)
-        member_of = (top_of[middle_of], middle_of, np.arange(len(leaves)))
         levels = tuple(
             TreeLevel(
                 silhouettes=rendered.runs[level].subset(leaders[level]),
@@ -177,7 +174,6 @@ class ShapeTree:
                 floor_offsets=rendered.floor_offsets[leaders[level]],
                 visibility=rendered.visibility[leaders[level]],
                 parents=parents[level].astype(np.int32),
-                spread=_spread(leaves, leaders[level][member_of[level]]),
             )
             for level in range(len(LEVEL_SIZES))
         )
@@ -295,12 +291,3 @@ def _leader_clusters(features: np.ndarray, limit: float) -> tuple[np.ndarray, np
         if len(leaders) - indexed >= REBUILD_EVERY:
             tree, indexed = cKDTree(features[leaders]), len(leaders)
     return np.array(leaders, dtype=np.int64), cluster
-
-
-def _spread(poses: np.ndarray, representative: np.ndarray) -> np.ndarray:
-    """RMS distance (parts,) meters per body part between each pose (n, 13, 3) and the
-    pose of its node's representative (`representative` (n,) indices into poses),
-    hip midpoints aligned."""
-    relative = poses - poses[:, [7, 8]].mean(axis=1, keepdims=True)
-    gaps = np.linalg.norm(relative - relative[representative], axis=-1)
-    return np.array([np.sqrt(np.mean(gaps[:, list(j)] ** 2)) for j in PART_JOINTS])

@@ -146,7 +146,7 @@ class SilhouetteTracker:
     def __init__(self, tree: ShapeTree, settings: TrackerSettings | None = None) -> None:
         self.tree = tree
         self.settings = settings or TrackerSettings()
-        self._features = [_part_features(level.poses) for level in tree.levels]
+        self._features = _part_features(tree.leaves.poses)
         away = np.abs(_facing_angles(tree.leaves.poses, tree.view.camera.center))
         self._turned_away = [away > self.settings.start_tolerance]
         for level in range(len(tree.levels) - 2, -1, -1):  # away when all leaves below are
@@ -197,8 +197,10 @@ class SilhouetteTracker:
             if level < len(LEVEL_SIZES) - 1:
                 sigma *= settings.upper_sigma_factor
             scores = -0.5 * (distances / sigma) ** 2
-            if level == len(LEVEL_SIZES) - 1 or self._previous is None:
-                scores = scores + self._log_prior(level, nodes)
+            if self._previous is None:
+                scores = np.where(self._turned_away[level][nodes], -np.inf, scores)
+            elif level == len(LEVEL_SIZES) - 1:
+                scores = scores + self._log_prior(nodes)
             order = np.argsort(scores)[::-1][: settings.keep[level]]
             order = order[scores[order] >= scores[order[0]] - settings.log_margin]
             nodes, scores, distances = nodes[order], scores[order], distances[order]
@@ -252,26 +254,21 @@ class SilhouetteTracker:
             self._last.pose, self._last.leaf, float("nan"), self._last.occluded, 0, False
         )
 
-    def _log_prior(self, level: int, nodes: np.ndarray) -> np.ndarray:
-        """Log prior (k,) of `nodes` on `level`: the motion model applied to the previous
-        posterior, each part floored `part_cap` below its peak; with no past, 0 for the
-        nodes that face the camera and -inf for the others."""
+    def _log_prior(self, leaves: np.ndarray) -> np.ndarray:
+        """Log prior (k,) of `leaves` (indices): the motion model applied to the previous
+        posterior, each part floored `part_cap` below its peak."""
         settings = self.settings
-        if self._previous is None:
-            return np.where(self._turned_away[level][nodes], -np.inf, 0.0)
-        leaves = self.tree.leaves
-        occluded = leaves.visibility[self._previous] < settings.occluded_below
+        occluded = self.tree.leaves.visibility[self._previous] < settings.occluded_below
         factor = np.where(occluded, settings.occlusion_factor, 1.0)
-        spread = self.tree.levels[level].spread
-        variance = (self._sigma * factor) ** 2 + spread**2  # (previous, parts)
+        variance = (self._sigma * factor) ** 2  # (previous, parts)
         peaks = np.log(self._weights) - 0.5 * (self._dims * np.log(2 * np.pi * variance)).sum(1)
-        log_density = np.broadcast_to(peaks, (len(nodes), len(peaks)))
-        mine, theirs = self._features[level], self._features[-1]
+        log_density = np.broadcast_to(peaks, (len(leaves), len(peaks)))
         for part, cap in enumerate(settings.part_cap):
-            a = mine[part][nodes]
-            b = theirs[part][self._previous]
+            features = self._features[part]
+            a = features[leaves]
+            b = features[self._previous]
             if len(self._best) == 2:
-                older, newer = theirs[part][self._best]
+                older, newer = features[self._best]
                 b = b + settings.velocity_gain * (newer - older)
             squared = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * a @ b.T
             penalty = 0.5 * np.maximum(squared, 0.0) / variance[None, :, part]

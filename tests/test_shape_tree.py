@@ -20,7 +20,7 @@ from silhouette_fixtures import (
 from samba.body_model import PART_NAMES, standing_heights
 from samba.errors import InputError
 from samba.pose_selection import distinct_poses
-from samba.shape_tree import DEFAULT_RADII, LEVEL_SIZES, PART_JOINTS, ShapeTree
+from samba.shape_tree import DEFAULT_RADII, LEVEL_SIZES, ShapeTree
 from samba.silhouette_distance import downsampled
 
 
@@ -161,22 +161,6 @@ def test_members_are_near_their_node_and_a_tighter_radius_makes_more_nodes(
     assert len(tighter.levels[0]) > len(small_tree.levels[0])
     assert len(tighter.levels[1]) > len(small_tree.levels[1])
     assert len(tighter.leaves) == len(small_tree.leaves)
-
-
-def test_spread_is_the_rms_joint_distance_from_leaves_to_their_node(
-    small_tree: ShapeTree,
-) -> None:
-    leaves = small_tree.leaves
-    relative = leaves.poses.astype(np.float64)
-    relative -= relative[:, [7, 8]].mean(axis=1, keepdims=True)
-    np.testing.assert_array_equal(leaves.spread, np.zeros(len(PART_JOINTS)))
-    for level in range(len(small_tree.levels) - 1):
-        nodes = small_tree.levels[level].poses.astype(np.float64)
-        nodes -= nodes[:, [7, 8]].mean(axis=1, keepdims=True)
-        gaps = np.linalg.norm(relative - nodes[_ancestors(small_tree, level)], axis=-1)
-        expected = [np.sqrt(np.mean(gaps[:, list(joints)] ** 2)) for joints in PART_JOINTS]
-        np.testing.assert_allclose(small_tree.levels[level].spread, expected, rtol=1e-4)
-        assert (small_tree.levels[level].spread > 0).all()
 
 
 def test_visibility_is_a_fraction_and_side_views_hide_an_arm(small_tree: ShapeTree) -> None:

@@ -53,7 +53,7 @@ def _assert_same_tree(read: ShapeTree, written: ShapeTree) -> None:
             x, y = getattr(mine.silhouettes, name), getattr(theirs.silhouettes, name)
             assert x.dtype == y.dtype, f"level {level} {name}"
             np.testing.assert_array_equal(x, y, err_msg=f"level {level} {name}")
-        for name in ("poses", "floor_offsets", "visibility", "parents", "spread"):
+        for name in ("poses", "floor_offsets", "visibility", "parents"):
             x, y = getattr(mine, name), getattr(theirs, name)
             assert x.dtype == y.dtype, f"level {level} {name}"
             np.testing.assert_array_equal(x, y, err_msg=f"level {level} {name}")

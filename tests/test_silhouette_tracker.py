@@ -200,7 +200,7 @@ def test_the_occlusion_aware_model_lets_a_hidden_arm_move(small_tree: ShapeTree)
         tracker = SilhouetteTracker(small_tree, settings)
         estimate = tracker.step(mask)
         assert estimate.leaf == leaf and estimate.occluded[arm]
-        prior = tracker._log_prior(len(small_tree.levels) - 1, np.array([leaf, other]))
+        prior = tracker._log_prior(np.array([leaf, other]))
         drops[factor] = prior[0] - prior[1]
         # One Gaussian per part around the previous leaf; a hidden part's sigma is
         # `factor` times wider.
