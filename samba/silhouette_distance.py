@@ -252,6 +252,38 @@ def downsampled(masks: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return out[0] if single else out
 
 
+def model_weighted_distances(
+    models: np.ndarray, observed: np.ndarray, kind: str = "core"
+) -> np.ndarray:
+    """Distances (n,) of an observed silhouette `observed` (H, W) bool to model
+    silhouettes `models` (n, H, W) bool, each weighted by the model's own weight map of
+    distance `kind` (`DISTANCES`, default alpha): the model's side of a symmetric
+    distance, equal to `SilhouetteWeights.from_mask(model, kind).distances(observed)`.
+
+    Each model's weights are computed on the bounding box of it and the observed
+    silhouette only (the XOR lies inside it, and distances to the model's pixels or to
+    its background are the same there as over the whole image). Raises `InputError` for
+    masks that are not bool, of different sizes, or an empty model.
+    """
+    _check_mask(observed, "observed")
+    _check_masks(models, "models")
+    if models.shape[1:] != observed.shape:
+        raise InputError("models", f"must be (n, {observed.shape[0]}, {observed.shape[1]})")
+    if kind not in DISTANCES:
+        raise InputError("kind", f"must be one of {', '.join(DISTANCES)}, got {kind!r}")
+    height, width = observed.shape
+    alpha = 0.0 if kind == "xor" else _check_alpha(None, kind, width)
+    out = np.empty(len(models))
+    for i, model in enumerate(models):
+        if not model.any():
+            raise InputError("models", f"silhouette {i} is empty")
+        box = _bounding_box(model | observed)
+        crop = model[box]
+        weights = _weight_map(crop, kind, alpha)
+        out[i] = weights[crop ^ observed[box]].sum(dtype=np.float64)
+    return out / (height * width)
+
+
 def _weight_map(mask: np.ndarray, kind: str, alpha: float) -> np.ndarray:
     """d_hat (H, W) float32 of the distance `kind` for an observed silhouette (H, W) bool,
     with `alpha` the weight of the inside term.

@@ -111,12 +111,14 @@ class SilhouetteRuns:
     def to_masks(self) -> np.ndarray:
         """The silhouettes (m, H, W) bool."""
         width, height = self.size
-        change = np.zeros((len(self), height * (width + 1) + 1), dtype=np.int8)
+        lengths = (self.ends - self.starts).astype(np.int64)
         owner = np.repeat(np.arange(len(self)), np.diff(self.offsets))
-        np.add.at(change, (owner, self.starts), 1)
-        np.add.at(change, (owner, self.ends), -1)
-        filled = np.cumsum(change[:, :-1], axis=1).reshape(len(self), height, width + 1)
-        return filled[:, :, :width] > 0
+        first = owner * (height * (width + 1)) + self.starts
+        skipped = np.cumsum(lengths) - lengths
+        pixels = np.repeat(first - skipped, lengths) + np.arange(lengths.sum())
+        masks = np.zeros((len(self), height, width + 1), dtype=bool)
+        masks.reshape(-1)[pixels] = True
+        return np.ascontiguousarray(masks[:, :, :width])
 
     def distances(self, sums: RowSums, indices: np.ndarray | None = None) -> np.ndarray:
         """Weighted XOR distances (k,) of the silhouettes at `indices` (default: all) to

@@ -13,6 +13,7 @@ from samba.silhouette_distance import (
     DISTANCES,
     SilhouetteWeights,
     downsampled,
+    model_weighted_distances,
     shape_skeleton,
     silhouette_matrix,
 )
@@ -211,6 +212,15 @@ def test_downsampled_pyramid_keeps_area_and_half_covered_pixels() -> None:
     assert np.array_equal(downsampled(block, (2, 2)), [[True, True], [False, False]])
 
 
+@pytest.mark.parametrize("kind", DISTANCES)
+def test_model_weighted_distances_weigh_the_xor_by_each_models_own_map(kind: str) -> None:
+    observed = figure()
+    models = np.stack([figure(30.0), figure(shift=(4, 2)), figure(-15.0, (-6, 0)), figure()])
+    each = [SilhouetteWeights.from_mask(m, kind).distances(observed[None])[0] for m in models]
+    np.testing.assert_allclose(model_weighted_distances(models, observed, kind), each, rtol=1e-6)
+    assert model_weighted_distances(models[3:], observed, kind)[0] == 0.0
+
+
 def test_bad_inputs_raise_typed_errors() -> None:
     observed = figure()
     weights = SilhouetteWeights.from_mask(observed)
@@ -226,6 +236,9 @@ def test_bad_inputs_raise_typed_errors() -> None:
         "alpha ": lambda: SilhouetteWeights.from_mask(observed, "xor", alpha=5.0),
         "masks": lambda: silhouette_matrix(observed),
         "size": lambda: downsampled(observed, (640, 480)),
+        "models   ": lambda: model_weighted_distances(np.zeros((1, 240, 320), bool), observed),
+        "observed": lambda: model_weighted_distances(observed[None], observed.astype(np.uint8)),
+        "models    ": lambda: model_weighted_distances(observed[None], observed[::2]),
     }
     for name, call in cases.items():
         with pytest.raises(InputError) as error:
