@@ -213,19 +213,13 @@ class SilhouetteTracker:
             weights = SilhouetteWeights.from_mask(image, settings.distance)
             distances = tree_level.silhouettes.distances(RowSums.from_weights(weights), nodes)
             evaluated += len(nodes)
-            least = settings.likelihood_sigma
-            if settings.distance != "xor":
-                least *= size[0] / LEVEL_SIZES[-1][0]
-            sigma = max(least, settings.relative_sigma * float(distances.min()))
             leaves = level == len(LEVEL_SIZES) - 1
-            if not leaves:
-                sigma *= settings.upper_sigma_factor
             prior = np.zeros(len(nodes))
             if self._previous is None:
                 prior[self._turned_away[level][nodes]] = -np.inf
             elif leaves:
                 prior = self._log_prior(nodes)
-            scores = prior - 0.5 * (distances / sigma) ** 2
+            scores = prior + self._log_likelihood(distances, size[0], leaves)
             if leaves and settings.symmetric_leaves:
                 top = np.argsort(scores)[::-1][: settings.symmetric_leaves]
                 nodes, prior = nodes[top], prior[top]
@@ -233,8 +227,7 @@ class SilhouetteTracker:
                 distances = distances[top] + model_weighted_distances(
                     masks, image, "xor" if settings.distance == "xor" else "core"
                 )
-                sigma = max(least, settings.relative_sigma * float(distances.min()))
-                scores = prior - 0.5 * (distances / sigma) ** 2
+                scores = prior + self._log_likelihood(distances, size[0], leaves)
             order = np.argsort(scores)[::-1][: settings.keep[level]]
             order = order[scores[order] >= scores[order[0]] - settings.log_margin]
             nodes, scores, distances = nodes[order], scores[order], distances[order]
@@ -255,6 +248,20 @@ class SilhouetteTracker:
         )
         self._last = estimate
         return estimate
+
+    def _log_likelihood(self, distances: np.ndarray, width: int, leaves: bool) -> np.ndarray:
+        """Eq. 3 for silhouette `distances` (k,) on a level `width` pixels wide: sigma is
+        `likelihood_sigma` (scaled to the width but for "xor") or `relative_sigma` times
+        the best distance, whichever is larger, `upper_sigma_factor` wider above the
+        leaves."""
+        settings = self.settings
+        least = settings.likelihood_sigma
+        if settings.distance != "xor":
+            least *= width / LEVEL_SIZES[-1][0]
+        sigma = max(least, settings.relative_sigma * float(distances.min()))
+        if not leaves:
+            sigma *= settings.upper_sigma_factor
+        return -0.5 * (distances / sigma) ** 2
 
     def _held_ancestors(self) -> list[np.ndarray]:
         """Per upper level, the nodes (sorted indices) above the previous posterior's
