@@ -143,8 +143,7 @@ class SilhouetteWeights:
         alpha.
         """
         _check_mask(mask, "mask")
-        if kind not in DISTANCES:
-            raise InputError("kind", f"must be one of {', '.join(DISTANCES)}, got {kind!r}")
+        _check_kind(kind)
         if kind == "xor" and alpha is not None:
             raise InputError("alpha", "the xor distance has no alpha")
         alpha = 0.0 if kind == "xor" else _check_alpha(alpha, kind, mask.shape[1])
@@ -269,8 +268,7 @@ def model_weighted_distances(
     _check_masks(models, "models")
     if models.shape[1:] != observed.shape:
         raise InputError("models", f"must be (n, {observed.shape[0]}, {observed.shape[1]})")
-    if kind not in DISTANCES:
-        raise InputError("kind", f"must be one of {', '.join(DISTANCES)}, got {kind!r}")
+    _check_kind(kind)
     height, width = observed.shape
     alpha = 0.0 if kind == "xor" else _check_alpha(None, kind, width)
     out = np.empty(len(models))
@@ -362,6 +360,12 @@ def _check_alpha(alpha: float | None, kind: str, width: int) -> float:
     if not isinstance(alpha, int | float | np.floating) or not (0 < alpha < np.inf):
         raise InputError("alpha", f"must be a positive finite number, got {alpha!r}")
     return float(alpha)
+
+
+def _check_kind(kind: str) -> None:
+    """InputError unless `kind` is one of `DISTANCES`."""
+    if kind not in DISTANCES:
+        raise InputError("kind", f"must be one of {', '.join(DISTANCES)}, got {kind!r}")
 
 
 def _check_mask(mask: np.ndarray, name: str) -> None:

@@ -32,6 +32,7 @@ import numpy as np
 from samba.body_model import CAPSULE_PARTS, PART_NAMES, BodyModel, checked_poses
 from samba.camera import Camera
 from samba.errors import InputError
+from samba.silhouette_runs import run_pixels
 
 NEAR = 0.05
 """Distance (m) in front of the camera plane, beyond a capsule's radius, its axis is
@@ -222,10 +223,8 @@ class _Runs:
 
     def pixels(self) -> np.ndarray:
         """Flat indices into the stacked images (n * H * W) of every pixel of every run."""
-        lengths = self.last - self.first + 1
         starts = (self.pose * self.height + self.row) * self.width + self.first
-        offsets = np.cumsum(lengths) - lengths
-        return np.repeat(starts - offsets, lengths) + np.arange(lengths.sum())
+        return run_pixels(starts, self.last - self.first + 1)
 
 
 def _paint(labels: np.ndarray, outlines: _Outlines, runs: _Runs) -> None:

@@ -21,6 +21,14 @@ from samba.errors import InputError
 from samba.silhouette_distance import SilhouetteWeights
 
 
+def run_pixels(first: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Flat indices (lengths.sum(),) of every pixel of runs that start at flat index
+    `first` (m,) and are `lengths` (m,) pixels long, run after run."""
+    lengths = np.asarray(lengths, dtype=np.int64)
+    skipped = np.cumsum(lengths) - lengths
+    return np.repeat(first - skipped, lengths) + np.arange(lengths.sum())
+
+
 @dataclass(frozen=True, eq=False)
 class RowSums:
     """One frame's `SilhouetteWeights` prepared for runs: `prefix` (H * (W + 1),) float64,
@@ -111,13 +119,10 @@ class SilhouetteRuns:
     def to_masks(self) -> np.ndarray:
         """The silhouettes (m, H, W) bool."""
         width, height = self.size
-        lengths = (self.ends - self.starts).astype(np.int64)
         owner = np.repeat(np.arange(len(self)), np.diff(self.offsets))
         first = owner * (height * (width + 1)) + self.starts
-        skipped = np.cumsum(lengths) - lengths
-        pixels = np.repeat(first - skipped, lengths) + np.arange(lengths.sum())
         masks = np.zeros((len(self), height, width + 1), dtype=bool)
-        masks.reshape(-1)[pixels] = True
+        masks.reshape(-1)[run_pixels(first, self.ends - self.starts)] = True
         return np.ascontiguousarray(masks[:, :, :width])
 
     def distances(self, sums: RowSums, indices: np.ndarray | None = None) -> np.ndarray:
