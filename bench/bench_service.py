@@ -23,9 +23,12 @@ ways:
 * end to end: from this process sending a frame's last packet to the kernel receiving
   the frame's last VMC bundle (both `time.time()` / `SO_TIMESTAMPNS` on one machine).
 
-Baseline, measured in the same run: one `Reconstructor.step` of the same method on the
-same markers in this process (the reconstruction alone, no I/O). Target (issue 6): p99 <= 10 ms
-with 4 sessions, no frame dropped.
+Baselines, measured in the same run in this process on the same frames: one
+`Reconstructor.step` of the same method (the reconstruction alone, no I/O), and the
+session's whole frame pipeline (`FramePipeline.process`: the nodes' labels triangulated,
+reconstructed, retargeted and sent as VMC to a local socket), back to back and paced at
+60 fps (one frame every 1/60 s, idle in between, as a live session runs it). Target
+(issue 6): p99 <= 10 ms with 4 sessions, no frame dropped.
 """
 
 from __future__ import annotations
@@ -56,8 +59,9 @@ from db.synthetic_store import build_synthetic_store  # noqa: E402
 from samba.calibration_file import write_calibration  # noqa: E402
 from samba.methods import method  # noqa: E402
 from samba.triangulation import Triangulation  # noqa: E402
+from service.frame_pipeline import CameraMarkers, FramePipeline  # noqa: E402
 from service.packet import encode  # noqa: E402
-from service.session_config import LABELLERS  # noqa: E402
+from service.session_config import LABELLERS, SessionConfig  # noqa: E402
 from service.synthetic_capture import SyntheticCapture  # noqa: E402
 from service.udp_input import UdpInput  # noqa: E402
 
@@ -65,6 +69,33 @@ TARGET_P99_MS = 10.0
 FPS = 60.0
 PHASES = ("aligned", "independent")
 """How the sessions' frame clocks lie to each other (`session_phases`)."""
+
+
+def pipeline_ms(
+    capture: SyntheticCapture, calibration: Path, store: Path, name: str, pace_s: float
+) -> np.ndarray:
+    """Milliseconds of each `FramePipeline.process` of one session (the nodes' labels,
+    VMC to a local socket nobody reads) over the capture's frames, one frame every
+    `pace_s` seconds (0: back to back) after a one-second warm-up."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sink:
+        sink.bind(("127.0.0.1", 0))
+        config = SessionConfig(
+            "baseline", calibration, store, name, FPS, (sink.getsockname(),), labels="nodes"
+        )
+        pipeline = FramePipeline(config, time.time())
+        frames = [CameraMarkers.from_labels(capture.pixels[:, f]) for f in range(capture.frames)]
+        for frame in frames[: round(FPS)]:
+            pipeline.process(frame, 0.0, time.time())
+        times = []
+        due = time.perf_counter()
+        for frame in frames:
+            due += pace_s
+            time.sleep(max(0.0, due - time.perf_counter()))
+            start = time.perf_counter()
+            pipeline.process(frame, 0.0, time.time())
+            times.append(time.perf_counter() - start)
+        pipeline.close()
+    return np.array(times) * 1e3
 
 
 def step_ms(capture: SyntheticCapture, store: Path, name: str) -> np.ndarray:
@@ -112,7 +143,7 @@ async def play(
 ) -> np.ndarray:
     """Send every frame of `capture` to every session at its capture time, session s
     `offsets[s]` seconds after the common grid; returns the time (s) each session's frame's
-    last packet left, (sessions, frames)."""
+    last packet was sent (taken just before the send), (sessions, frames)."""
     sessions = len(offsets)
     sent = np.empty((sessions, capture.frames))
     start_at = time.time() + 1.0
@@ -126,10 +157,16 @@ async def play(
             delay = start_at + at - time.time()
             if delay > 0:
                 await asyncio.sleep(delay)
-            for camera in range(len(capture.cameras)):
-                packet = capture.packet(camera, frame, start_at + offsets[s], f"s{s}")
-                sock.sendto(encode(packet), address)
+            datagrams = [
+                encode(capture.packet(camera, frame, start_at + offsets[s], f"s{s}"))
+                for camera in range(len(capture.cameras))
+            ]
+            for datagram in datagrams[:-1]:
+                sock.sendto(datagram, address)
+            # Before the last send, not after: the server's wake-up can preempt this
+            # process right after it, and a time taken then would be late by the frame.
             sent[s, frame] = time.time()
+            sock.sendto(datagrams[-1], address)
     return sent
 
 
@@ -224,6 +261,8 @@ def bench(
         write_calibration(calibration, capture.cameras)
         with threadpool_limits(1):
             baseline = step_ms(capture, store, name)
+            back_to_back = pipeline_ms(capture, calibration, store, name, 0.0)
+            paced = pipeline_ms(capture, calibration, store, name, 1.0 / FPS)
         rows = [
             [how, phase, *run(n, w, how, phase, capture, calibration, store, name, tmp)]
             for how in labels
@@ -235,6 +274,15 @@ def bench(
     print(
         f"\nBaseline, same run: Reconstructor.step ({name}) in-process, no I/O: "
         f"p50 {base:.2f} ms, p99 {np.percentile(baseline, 99):.2f} ms per frame"
+    )
+    print_table(
+        "Baseline, same run: one session's frame pipeline in-process (triangulate, "
+        "reconstruct, retarget, VMC), ms per frame",
+        ["frames", "p50", "p99"],
+        [
+            [how, float(np.percentile(t, 50)), float(np.percentile(t, 99))]
+            for how, t in (("back to back", back_to_back), ("paced at 60 fps", paced))
+        ],
     )
     print_table(
         f"Live service, {seconds:g} s of 60 fps x 2 cameras per session, method {name} "
