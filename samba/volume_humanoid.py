@@ -2,7 +2,8 @@
 (`samba.volume_capture`), when the derived model has human topology.
 
 Of the common model's five leaf branches, the two whose ends are lowest on average are
-the legs, the shortest of the other three is the head and the remaining two are the
+the legs, the shortest of the other three (by the mean arc length of the branch, which
+the number of joints on it does not change) is the head and the remaining two are the
 arms; left and right come from the subject's facing direction in the first frame
 (given by the user: the volume alone cannot tell front from back). Each limb is the
 polyline from its branch's start (the root or a branching node: the top of the trunk
@@ -100,10 +101,9 @@ def humanoid_joints(fit: SequenceFit, facing: np.ndarray) -> np.ndarray:
     left = np.cross([0.0, 1.0, 0.0], forward / np.linalg.norm(forward))
     limbs = {b: _limb(fit, b) for b in leaves}
     ends = {b: limbs[b][:, -1] for b in leaves}
-    lengths = {b: np.linalg.norm(np.diff(limbs[b], axis=1), axis=-1).sum(-1).mean() for b in leaves}
     legs = sorted(leaves, key=lambda b: ends[b][:, 1].mean())[:2]
     rest = [b for b in leaves if b not in legs]
-    head = min(rest, key=lambda b: lengths[b])
+    head = min(rest, key=lambda b: model.lengths[b])
     arms = [b for b in rest if b != head]
     stature = float(np.percentile(ends[head][:, 1], 90))
     joints = np.zeros((len(fit.root), N_JOINTS, 3))

@@ -98,6 +98,18 @@ def test_a_branch_seen_in_enough_frames_is_in_the_model_whatever_its_shape() -> 
     assert fit_sequence([_star(5)] * 22 + tail[:8]).model.branch_count == 5  # 27%: noise
 
 
+def test_a_branch_gets_the_joint_count_its_frames_have_most_often() -> None:
+    # One joint at mid-length in 7 frames; in 3 the skewness test cut the straight
+    # link five times over. The mean count (2.2) would round to 2 joints.
+    points = np.linspace([0.0, 0.0, 0.0], [0.0, 0.6, 0.0], 13)
+    clean = FrameModel(np.zeros(3), (Branch(-1, points, np.array([0.5])),))
+    noisy = FrameModel(np.zeros(3), (Branch(-1, points, np.array([0.2, 0.4, 0.6, 0.8, 0.9])),))
+    model = fit_sequence([clean] * 7 + [noisy] * 3).model
+    assert len(model.joints[0]) == 1
+    assert model.joints[0][0] == pytest.approx(0.5, abs=0.02)
+    assert model.link_count == 2
+
+
 def test_posed_model_keeps_the_measured_directions() -> None:
     report = creature_take(
         long_chain(4), "chain", seed=1, frames=12, bounds=((-1, 0, -1), (1, 0.8, 1))
