@@ -17,8 +17,11 @@ often (`_joint_count`), placed at the highest peaks of the sample's density, and
 mean length of its matches.
 
 Pass 3 places the model's joints on every frame's matched branches at those
-fractions. Joints of branches a frame lacks are interpolated in time between the
-frames that have them (held at the ends of the sequence).
+fractions, and each leaf branch's end where the frame's branch puts it, about one
+local radius inside the volume's tip (`Branch.end`), but no nearer its last joint than
+halfway from there to the curve's end, so that no link loses its length. Joints of
+branches a frame lacks are interpolated in time between the frames that have them
+(held at the ends of the sequence).
 """
 
 from __future__ import annotations
@@ -133,11 +136,13 @@ def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
     root = np.stack([f.root for f in frames])
     points = []
     for b in range(count):
-        fractions = np.append(model.joints[b], 1.0)
-        placed = np.full((n, len(fractions), 3), np.nan)
+        placed = np.full((n, len(model.joints[b]) + 1, 3), np.nan)
+        last = model.joints[b][-1] if len(model.joints[b]) else 0.0
         for t in range(n):
             if matches[t, b] >= 0:
-                placed[t] = frames[t].branches[matches[t, b]].at(fractions)
+                branch = frames[t].branches[matches[t, b]]
+                end = 1.0 if b in model.parents else max(branch.end, (1.0 + last) / 2.0)
+                placed[t] = branch.at(np.append(model.joints[b], end))
         points.append(_fill_in_time(placed))
     return SequenceFit(model=model, matches=matches, root=root, branch_points=tuple(points))
 

@@ -8,10 +8,10 @@ import pytest
 
 from samba.articulated_figure import long_chain, quadruped
 from samba.errors import InputError
-from samba.frame_kinematics import Branch, FrameModel
+from samba.frame_kinematics import Branch, FrameModel, frame_model
 from samba.isomap import VoxelGraph, isomap
 from samba.sequence_model import fit_sequence
-from samba.spherical_shells import sweep_and_prune
+from samba.spherical_shells import skeleton_curve, sweep_and_prune
 from samba.volume_capture import capture_volumes
 from samba.volume_evaluation import HumanReport, creature_take, exaggerated, human_take
 from samba.voxel_grid import VoxelGrid
@@ -58,6 +58,34 @@ def test_isomap_unfolds_a_bent_bar_to_its_length() -> None:
     points = isomap(graph).points
     span = np.ptp(points @ np.linalg.svd(points, full_matrices=False)[2][0])
     assert span == pytest.approx(40 + 34 - 4, rel=0.1)  # the path along the bar, not 50
+
+
+def test_a_capsules_ends_lie_one_radius_inside_its_tips() -> None:
+    # A straight capsule along x: axis from -20 to 20 voxels, radius 4, round caps.
+    radius, half, voxel = 4, 20, 0.025
+    reach = half + radius + 1
+    axes = [np.arange(-reach, reach + 1)] + [np.arange(-radius - 1, radius + 2)] * 2
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    on_axis = np.clip(grid[:, 0], -half, half)
+    inside = np.hypot(grid[:, 0] - on_axis, np.hypot(grid[:, 1], grid[:, 2])) <= radius
+    indices = grid[inside]
+    graph = VoxelGraph.from_indices(indices)
+    positions = indices * voxel
+    model = frame_model(skeleton_curve(isomap(graph), graph, positions), positions)
+    fit = fit_sequence([model] * 3)
+    assert len(model.branches) == 2
+    for b, branch in enumerate(model.branches):
+        assert abs(branch.points[-1, 0]) / voxel > half + 2  # the curve runs into the cap
+        assert branch.inset / voxel == pytest.approx(radius - 1.5, abs=1.0)
+        assert abs(fit.branch_points[b][:, -1, 0]) / voxel == pytest.approx(half, abs=1.0)
+
+
+def test_a_leaf_end_stays_past_its_last_joint() -> None:
+    points = np.linspace([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 11)
+    near_tip = FrameModel(np.zeros(3), (Branch(-1, points, np.array([0.9]), inset=0.3),))
+    bare = FrameModel(np.zeros(3), (Branch(-1, points, np.zeros(0), inset=0.3),))
+    assert fit_sequence([near_tip] * 4).branch_points[0][:, -1, 1] == pytest.approx(0.95)
+    assert fit_sequence([bare] * 4).branch_points[0][:, -1, 1] == pytest.approx(0.7)
 
 
 def test_long_chain_gives_two_ends_and_its_links() -> None:
