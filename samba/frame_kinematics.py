@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from samba.segments import segment_distances
+from samba.segments import point_segment_distances
 from samba.spherical_shells import SkeletonCurve
 
 SKEWNESS = 0.0
@@ -51,13 +51,16 @@ class Branch:
     node. `joints` (j,): the fractions (0..1) of the branch's arc length at which the
     skewness test placed joints inside it, increasing. `inset` (m): how far along the
     curve before its last point the branch's end lies (a leaf's: about one local radius
-    inside the volume's tip; 0 for branches that carry others).
+    inside the volume's tip; 0 for branches that carry others). `radius` (m): the
+    radius of the volume around the branch (`volume_radius` of its voxels but the
+    parent node's; 0 when unknown).
     """
 
     parent: int
     points: np.ndarray
     joints: np.ndarray
     inset: float = 0.0
+    radius: float = 0.0
 
     @property
     def length(self) -> float:
@@ -166,6 +169,7 @@ def frame_model(
             points=points,
             joints=_segment(points, branch_voxels, skewness),
             inset=0.0 if children[end] else tip_inset(points, branch_voxels),
+            radius=volume_radius(points, np.concatenate(branch_voxels[1:])),
         )
         ends[end] = len(branches)
         branches.append(branch)
@@ -208,14 +212,23 @@ def tip_inset(points: np.ndarray, voxels: list[np.ndarray]) -> float:
     near = np.concatenate(voxels[max(1, len(points) - TIP_NODES) :])
     if len(near) == 0:
         return 0.0
-    to_curve = segment_distances(near[:, None], near[:, None], points[None, :-1], points[None, 1:])
-    radius = np.sqrt(2.0) * float(np.median(to_curve.min(axis=1)))
+    radius = volume_radius(points, near)
     direction = points[-1] - points[-2]
     norm = np.linalg.norm(direction)
     reach = 0.0
     if norm > 0 and len(voxels[-1]):
         reach = max(0.0, float(((voxels[-1] - points[-1]) @ (direction / norm)).max()))
     return float(np.clip(radius - reach, 0.0, MAX_INSET * length))
+
+
+def volume_radius(points: np.ndarray, voxels: np.ndarray) -> float:
+    """Radius (m) of a filled cylinder around the curve `points` (p, 3) m, p >= 2, whose
+    voxels' median distance from its axis is that of the voxel centres `voxels` (k, 3)
+    m from the curve (median = radius / sqrt 2); 0 without voxels."""
+    if len(voxels) == 0:
+        return 0.0
+    to_curve = point_segment_distances(voxels, points[:-1], points[1:]).min(axis=1)
+    return np.sqrt(2.0) * float(np.median(to_curve))
 
 
 def linear_skewness(voxels: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:

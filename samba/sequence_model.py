@@ -14,7 +14,11 @@ directions and their lengths in one number).
 Then, per model branch, the joint fractions the skewness test placed in the matched
 frames form a 1-D sample; the branch gets the number of joints its matches have most
 often (`_joint_count`), placed at the highest peaks of the sample's density, and the
-mean length of its matches.
+mean length of its matches. A branch that carries others ends at its last joint
+instead of the branching node when that joint lies within `JUNCTION` of the branch's
+radius of the node (`_junction`): the two are one joint. A leaf branch drops a last
+joint that would leave it a last link shorter than `TIP_LINK` of its radius
+(`_off_the_tip`).
 
 Pass 3 places the model's joints on every frame's matched branches at those
 fractions, and each leaf branch's end where the frame's branch puts it, about one
@@ -53,6 +57,30 @@ a take whose frames split evenly between five ends and a spurious sixth gets the
 (the first second of the natural wave of seed 11: 5 and 5 frames, human before)."""
 BANDWIDTH = 0.04
 """Kernel width (fraction of the branch) of the joint-fraction density."""
+JUNCTION = 0.6
+"""Share of a carrying branch's radius (`Branch.radius`, m) within which its last joint
+stands for the branching node it ends at. The skewness test fires where a trunk's
+voxels start to bulge into the limbs it carries, one or two curve points before the
+node where the curve branches, and that node lies off the trunk's axis, inside the
+limbs' roots. On the quadruped of `bench/bench_volume.py` (seeds 1-5) both trunk
+branches had such a last joint, 0.33-0.46 radii (about 1.5 voxels) from the node, the
+next joint at least 1.46 radii away; the joint lay 1.6-2.6 voxels from the true pelvis
+or withers, the node 3.0-3.5. Ending the trunk's branches there took 2 links off every
+take with the same true joints within 2 voxels; any share from 0.5 to 1.2 did so. The
+human takes of seeds 1-5 moved by +0.05 cm on average at 0.6 (single takes -0.6 to
++0.8 cm), +0.01 cm at 1.0 (-1.3 to +1.2 cm): the smaller share moves fewer human
+branch starts, which `samba.volume_humanoid` was fitted to. Only the last joint
+counts: ending a human's trunk branch at the first of two such joints instead moved
+the crotch up 9 cm in one held-out take (the exaggerated jumping jacks of seed 11,
++1.8 cm; no take of seeds 1-5 changed)."""
+TIP_LINK = 1.0
+"""Shortest last link of a leaf branch, in radii of the branch (`Branch.radius`): a last
+joint nearer the branch's end than that lies in the volume's round tip (a capsule's
+cap is one radius long), where the skewness test fires as the volume narrows, and is
+dropped. On the quadruped of `bench/bench_volume.py` (seeds 1-5) the tail's or a leg's
+last joint sat 0.2-1.4 voxels before the end in three takes; dropping it took 1 link off
+each with the same true joints within 2 voxels (0.5 radii took 2, 1.5 took 4; the
+human takes of seeds 1-5 moved by +0.02 to +0.03 cm on average at 0.5 to 1.5)."""
 
 
 @dataclass(frozen=True)
@@ -60,8 +88,9 @@ class CommonModel:
     """The kinematic model of a sequence.
 
     `parents` (B,): parent branch of each branch, -1 at the root; `lengths` (B,) mean
-    arc length, meters; `joints`: per branch, the fractions (0..1, increasing) of its
-    length where its interior joints sit. `signature` is the branch tree's canonical
+    arc length, meters, to the branch's end (a branching node or the joint standing
+    for it, `_junction`); `joints`: per branch, the fractions (0..1, increasing) of
+    that length where its interior joints sit. `signature` is the branch tree's canonical
     shape (`FrameModel.signature`).
     """
 
@@ -122,13 +151,22 @@ def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
             for b, found in enumerate(matches[t]):
                 if found >= 0:
                     last[b] = frames[t].branches[found].points
-    joints, lengths = [], np.zeros(count)
+    parents = tuple(b.parent for b in base.branches)
+    joints, lengths, stops = [], np.zeros(count), np.ones(count)
     for b in range(count):
         matched = [frames[t].branches[matches[t, b]] for t in range(n) if matches[t, b] >= 0]
-        lengths[b] = np.mean([m.length for m in matched])
-        joints.append(_joint_peaks(matched))
+        length = float(np.mean([m.length for m in matched]))
+        peaks = _joint_peaks(matched)
+        radius = float(np.mean([m.radius for m in matched]))
+        if b in parents:
+            peaks, stops[b] = _junction(peaks, length, radius)
+        else:
+            end = float(np.mean([m.end for m in matched]))
+            peaks = _off_the_tip(peaks, end, length, radius)
+        joints.append(peaks)
+        lengths[b] = length * stops[b]
     model = CommonModel(
-        parents=tuple(b.parent for b in base.branches),
+        parents=parents,
         lengths=lengths,
         joints=tuple(joints),
         signature=signature,
@@ -137,12 +175,11 @@ def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
     points = []
     for b in range(count):
         placed = np.full((n, len(model.joints[b]) + 1, 3), np.nan)
-        last = model.joints[b][-1] if len(model.joints[b]) else 0.0
         for t in range(n):
             if matches[t, b] >= 0:
                 branch = frames[t].branches[matches[t, b]]
-                end = 1.0 if b in model.parents else max(branch.end, (1.0 + last) / 2.0)
-                placed[t] = branch.at(np.append(model.joints[b], end))
+                end = 1.0 if b in model.parents else _leaf_end(branch.end, model.joints[b])
+                placed[t] = branch.at(np.append(model.joints[b], end) * stops[b])
         points.append(_fill_in_time(placed))
     return SequenceFit(model=model, matches=matches, root=root, branch_points=tuple(points))
 
@@ -174,6 +211,33 @@ def _joint_peaks(matched: list[Branch]) -> np.ndarray:
     peak = np.flatnonzero((density[1:-1] >= density[:-2]) & (density[1:-1] > density[2:])) + 1
     best = peak[np.argsort(density[peak])[::-1][:count]]
     return np.sort(grid[best])
+
+
+def _junction(peaks: np.ndarray, length: float, radius: float) -> tuple[np.ndarray, float]:
+    """The joint fractions (k,) of a carrying branch of `length` and `radius` (m) with
+    joints at `peaks` (k + 1 or k,), rescaled to where it ends, and that end (fraction
+    of its curve): at its last joint when within `JUNCTION` of the radius of the
+    branching node (which it then stands for), at the node (1) otherwise."""
+    if len(peaks) == 0 or (1.0 - peaks[-1]) * length >= JUNCTION * radius:
+        return peaks, 1.0
+    return peaks[:-1] / peaks[-1], float(peaks[-1])
+
+
+def _off_the_tip(peaks: np.ndarray, end: float, length: float, radius: float) -> np.ndarray:
+    """The joint fractions `peaks` (k,) of a leaf branch of `length` and `radius` (m)
+    whose end lies at fraction `end`, without its last joint when that leaves a last
+    link (to `_leaf_end`) shorter than `TIP_LINK` radii."""
+    if len(peaks) and (_leaf_end(end, peaks) - peaks[-1]) * length < TIP_LINK * radius:
+        return peaks[:-1]
+    return peaks
+
+
+def _leaf_end(end: float, joints: np.ndarray) -> float:
+    """Where a leaf branch with `joints` (k,) (fractions of its curve) ends: at `end` (the
+    fraction one radius inside the volume's tip, `Branch.end`), but no nearer its last
+    joint than halfway from there to the curve's end, so that no link loses its length."""
+    last = joints[-1] if len(joints) else 0.0
+    return max(end, (1.0 + last) / 2.0)
 
 
 def _joint_count(matched: list[Branch]) -> int:

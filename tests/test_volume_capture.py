@@ -77,6 +77,7 @@ def test_a_capsules_ends_lie_one_radius_inside_its_tips() -> None:
     for b, branch in enumerate(model.branches):
         assert abs(branch.points[-1, 0]) / voxel > half + 2  # the curve runs into the cap
         assert branch.inset / voxel == pytest.approx(radius - 1.5, abs=1.0)
+        assert branch.radius / voxel == pytest.approx(radius, abs=0.5)
         assert abs(fit.branch_points[b][:, -1, 0]) / voxel == pytest.approx(half, abs=1.0)
 
 
@@ -136,6 +137,42 @@ def test_a_branch_gets_the_joint_count_its_frames_have_most_often() -> None:
     assert len(model.joints[0]) == 1
     assert model.joints[0][0] == pytest.approx(0.5, abs=0.02)
     assert model.link_count == 2
+
+
+def _forked(trunk_joint: float) -> FrameModel:
+    """A trunk 0.5 m long, radius 0.1 m, with a joint at `trunk_joint` of its length,
+    carrying two straight legs 0.4 m long from its end."""
+    trunk = Branch(
+        -1, np.linspace([0.0, 0.0, 0.0], [0.5, 0.0, 0.0], 11), np.array([trunk_joint]), radius=0.1
+    )
+    legs = tuple(
+        Branch(0, np.linspace([0.5, 0.0, 0.0], [0.5, -0.4, side], 9), np.zeros(0), radius=0.05)
+        for side in (-0.1, 0.1)
+    )
+    return FrameModel(np.zeros(3), (trunk, *legs))
+
+
+def test_a_trunk_joint_next_to_its_branching_node_becomes_the_trunks_end() -> None:
+    # The joint 3 cm before the node (0.3 radii) stands for it: the trunk ends there,
+    # one link; a joint at mid-trunk stays a joint of its own.
+    fit = fit_sequence([_forked(0.94)] * 4)
+    assert len(fit.model.joints[0]) == 0
+    assert fit.model.link_count == 3
+    assert fit.model.lengths[0] == pytest.approx(0.47)
+    assert fit.branch_points[0][:, -1, 0] == pytest.approx(0.47)
+    mid = fit_sequence([_forked(0.5)] * 4)
+    assert mid.model.joints[0] == pytest.approx([0.5])
+    assert mid.branch_points[0][:, -1, 0] == pytest.approx(0.5)
+
+
+def test_a_leaf_drops_a_last_joint_in_its_round_tip() -> None:
+    # Joints at 0.5 and 0.97 of a 1 m leaf of radius 0.05 m ending at its curve's end:
+    # the last link would be 3 cm, shorter than the radius.
+    points = np.linspace([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 21)
+    tipped = FrameModel(np.zeros(3), (Branch(-1, points, np.array([0.5, 0.97]), radius=0.05),))
+    fit = fit_sequence([tipped] * 4)
+    assert fit.model.joints[0] == pytest.approx([0.5])
+    assert fit.branch_points[0][:, -1, 1] == pytest.approx(1.0)
 
 
 def test_posed_model_keeps_the_measured_directions() -> None:
