@@ -227,7 +227,7 @@ def volume_radius(points: np.ndarray, voxels: np.ndarray) -> float:
     m from the curve (median = radius / sqrt 2); 0 without voxels."""
     if len(voxels) == 0:
         return 0.0
-    to_curve = point_segment_distances(voxels, points[:-1], points[1:]).min(axis=1)
+    to_curve = point_segment_distances(voxels[:, None], points[:-1], points[1:]).min(axis=1)
     return np.sqrt(2.0) * float(np.median(to_curve))
 
 

@@ -37,10 +37,11 @@ def segment_distances(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.nda
 
 
 def point_segment_distances(points: np.ndarray, p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
-    """Distances (n, m) from points (n, d) to the segments p0-p1 (m, d): the
+    """Distances (...) from points (..., d) to the segments p0-p1 (..., d), broadcast over
+    the leading axes (points (n, 1, d) against segments (m, d) give (n, m)): the
     `segment_distances` of a point and a segment, with less work per pair."""
     step = p1 - p0
-    offset = points[:, None] - p0
+    offset = points - p0
     squared = np.maximum((step * step).sum(axis=-1), _TINY)
     along = np.clip((offset * step).sum(axis=-1) / squared, 0.0, 1.0)
     return np.linalg.norm(offset - along[..., None] * step, axis=-1)

@@ -18,7 +18,13 @@ mean length of its matches. A branch that carries others ends at its last joint
 instead of the branching node when that joint lies within `JUNCTION` of the branch's
 radius of the node (`_junction`): the two are one joint. A leaf branch drops a last
 joint that would leave it a last link shorter than `TIP_LINK` of its radius
-(`_off_the_tip`).
+(`_off_the_tip`). Last, a joint stays only where the branch bends over the sequence
+(`_bent`): with the joints as breakpoints shared by every frame, each link is a
+straight segment in every frame, and the fit's cost is the squared distance of the
+matched curves, sampled at `SAMPLES` of their length, from those segments. A joint
+whose removal raises that cost by less than `STRAIGHT` squared per sample and frame
+stands in a straight stretch of the branch (the skewness test cut a straight link in
+enough frames to carry the count) and is dropped, the weakest first.
 
 Pass 3 places the model's joints on every frame's matched branches at those
 fractions, and each leaf branch's end where the frame's branch puts it, about one
@@ -38,6 +44,7 @@ from scipy.stats import gaussian_kde
 
 from samba.errors import InputError
 from samba.frame_kinematics import Branch, FrameModel, points_along
+from samba.segments import point_segment_distances
 
 RESAMPLE = np.linspace(0.0, 1.0, 6)
 """Fractions of arc length at which two branches are compared."""
@@ -81,6 +88,26 @@ dropped. On the quadruped of `bench/bench_volume.py` (seeds 1-5) the tail's or a
 last joint sat 0.2-1.4 voxels before the end in three takes; dropping it took 1 link off
 each with the same true joints within 2 voxels (0.5 radii took 2, 1.5 took 4; the
 human takes of seeds 1-5 moved by +0.02 to +0.03 cm on average at 0.5 to 1.5)."""
+FRAME_CHUNK = 64
+"""Frames whose straight-link distances `_link_costs` computes at once (memory: about
+12,000 sample-link pairs per frame)."""
+SAMPLES = np.linspace(0.0, 1.0, 41)
+"""Fractions of a branch's length at which its matched curves are fitted by straight
+links (`_bent`): 1.5 cm apart on a quadruped's 0.6 m leg, under a voxel."""
+STRAIGHT = 0.014
+"""RMS distance (m) from a branch's straight links that a joint must take off its
+matched curves (per sample and frame, over the whole branch) to stay (`_bent`). On the
+quadruped of `bench/bench_volume.py` (seeds 1-5, 25 mm voxels) every take kept a second
+joint in a straight stretch of a leg, the tail or the neck (where the skewness test
+cuts a link in many frames). Dropping joints worth less than 8, 10, 12, 14 and 16 mm
+took the 94 links of the five takes to 90, 88, 86, 84 and 83, with the same true
+joints within 2 voxels and the chain's 6 links and joints; 18 mm took one true joint
+off quadruped-2 and a link off chain-3. The human takes of seeds 1-5 (30 mm voxels)
+went from 9.53 cm on average to 9.44-9.49 cm. Whether a bend moves over the take does
+not tell joints apart here: a human's shoulder, wrist and ankle bends hardly move in
+the synthetic takes (their angle spreads 5-8 degrees over a take, the quadruped's
+tail's fixed bend out of the body 3-5), and dropping the joints whose angle spread
+less than 8 degrees raised the human takes' error by 0.8 cm."""
 
 
 @dataclass(frozen=True)
@@ -163,7 +190,7 @@ def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
         else:
             end = float(np.mean([m.end for m in matched]))
             peaks = _off_the_tip(peaks, end, length, radius)
-        joints.append(peaks)
+        joints.append(_bent(peaks, matched, stops[b]))
         lengths[b] = length * stops[b]
     model = CommonModel(
         parents=parents,
@@ -230,6 +257,55 @@ def _off_the_tip(peaks: np.ndarray, end: float, length: float, radius: float) ->
     if len(peaks) and (_leaf_end(end, peaks) - peaks[-1]) * length < TIP_LINK * radius:
         return peaks[:-1]
     return peaks
+
+
+def _bent(joints: np.ndarray, matched: list[Branch], stop: float) -> np.ndarray:
+    """The joints `joints` (k,) (fractions of the branches' curves up to `stop`) at which
+    the `matched` branches bend: without those whose removal raises the straight-link
+    fit's cost (`_link_costs`) by less than `STRAIGHT` squared per sample and frame,
+    dropped one by one, the one raising it least first."""
+    curves = np.stack([m.at(SAMPLES * stop) for m in matched])
+    costs = _link_costs(curves)
+    cuts = np.rint(joints * (len(SAMPLES) - 1)).astype(np.int64)
+    floor = STRAIGHT**2 * curves.shape[0] * curves.shape[1]
+    keep = np.ones(len(cuts), dtype=bool)
+    while keep.any():
+        kept = np.flatnonzero(keep)
+        now = _fit_cost(costs, cuts[kept])
+        rises = [_fit_cost(costs, cuts[np.delete(kept, i)]) - now for i in range(len(kept))]
+        weakest = int(np.argmin(rises))
+        if rises[weakest] >= floor:
+            break
+        keep[kept[weakest]] = False
+    return joints[keep]
+
+
+def _link_costs(curves: np.ndarray) -> np.ndarray:
+    """(s, s) m^2: for samples a < c of curves (n, s, 3) m, the summed squared distance,
+    over the frames, of samples a..c from the segment between samples a and c (a link
+    straight in every frame); 0 on and below the diagonal."""
+    count = curves.shape[1]
+    first, last = np.triu_indices(count, k=1)
+    link, sample = np.nonzero(
+        (np.arange(count) >= first[:, None]) & (np.arange(count) <= last[:, None])
+    )
+    total = np.zeros(len(first))
+    for chunk in range(0, len(curves), FRAME_CHUNK):
+        part = curves[chunk : chunk + FRAME_CHUNK]
+        distance = point_segment_distances(
+            part[:, sample], part[:, first[link]], part[:, last[link]]
+        )
+        total += np.bincount(link, (distance**2).sum(axis=0), len(first))
+    costs = np.zeros((count, count))
+    costs[first, last] = total
+    return costs
+
+
+def _fit_cost(costs: np.ndarray, cuts: np.ndarray) -> float:
+    """Cost (m^2) of the straight links between the samples `cuts` (k,), increasing,
+    and the curves' ends, from the link costs `costs` (s, s) (`_link_costs`)."""
+    ends = np.concatenate([[0], cuts, [len(costs) - 1]])
+    return float(costs[ends[:-1], ends[1:]].sum())
 
 
 def _leaf_end(end: float, joints: np.ndarray) -> float:

@@ -81,12 +81,26 @@ def test_a_capsules_ends_lie_one_radius_inside_its_tips() -> None:
         assert abs(fit.branch_points[b][:, -1, 0]) / voxel == pytest.approx(half, abs=1.0)
 
 
+def _kinked(at: float, degrees: float, length: float = 1.0, count: int = 21) -> np.ndarray:
+    """Points (count or count + 1, 3) m of a polyline `length` m long from the origin
+    along +x that turns by `degrees` towards +y at fraction `at` of its length: `count`
+    evenly spaced points and the bend."""
+    arc = np.union1d(np.linspace(0.0, 1.0, count), [at]) * length
+    before, after = np.minimum(arc, at * length), np.maximum(arc - at * length, 0.0)
+    angle = np.radians(degrees)
+    return np.stack(
+        [before + after * np.cos(angle), after * np.sin(angle), np.zeros_like(arc)], axis=1
+    )
+
+
 def test_a_leaf_end_stays_past_its_last_joint() -> None:
-    points = np.linspace([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 11)
+    points = _kinked(0.9, 90.0, count=11)  # a joint where the leaf turns, 0.1 m before its tip
     near_tip = FrameModel(np.zeros(3), (Branch(-1, points, np.array([0.9]), inset=0.3),))
     bare = FrameModel(np.zeros(3), (Branch(-1, points, np.zeros(0), inset=0.3),))
-    assert fit_sequence([near_tip] * 4).branch_points[0][:, -1, 1] == pytest.approx(0.95)
-    assert fit_sequence([bare] * 4).branch_points[0][:, -1, 1] == pytest.approx(0.7)
+    assert fit_sequence([near_tip] * 4).branch_points[0][:, -1] == pytest.approx(
+        np.tile([0.9, 0.05, 0.0], (4, 1))
+    )
+    assert fit_sequence([bare] * 4).branch_points[0][:, -1, 0] == pytest.approx(0.7)
 
 
 def test_long_chain_gives_two_ends_and_its_links() -> None:
@@ -128,9 +142,9 @@ def test_a_branch_seen_in_enough_frames_is_in_the_model_whatever_its_shape() -> 
 
 
 def test_a_branch_gets_the_joint_count_its_frames_have_most_often() -> None:
-    # One joint at mid-length in 7 frames; in 3 the skewness test cut the straight
-    # link five times over. The mean count (2.2) would round to 2 joints.
-    points = np.linspace([0.0, 0.0, 0.0], [0.0, 0.6, 0.0], 13)
+    # One joint at mid-length, where the branch bends, in 7 frames; in 3 the skewness
+    # test cut it five times over. The mean count (2.2) would round to 2 joints.
+    points = _kinked(0.5, 45.0, length=0.6, count=13)
     clean = FrameModel(np.zeros(3), (Branch(-1, points, np.array([0.5])),))
     noisy = FrameModel(np.zeros(3), (Branch(-1, points, np.array([0.2, 0.4, 0.6, 0.8, 0.9])),))
     model = fit_sequence([clean] * 7 + [noisy] * 3).model
@@ -139,14 +153,15 @@ def test_a_branch_gets_the_joint_count_its_frames_have_most_often() -> None:
     assert model.link_count == 2
 
 
-def _forked(trunk_joint: float) -> FrameModel:
-    """A trunk 0.5 m long, radius 0.1 m, with a joint at `trunk_joint` of its length,
-    carrying two straight legs 0.4 m long from its end."""
-    trunk = Branch(
-        -1, np.linspace([0.0, 0.0, 0.0], [0.5, 0.0, 0.0], 11), np.array([trunk_joint]), radius=0.1
-    )
+def _forked(trunk_joint: float, bend: float = 0.0) -> FrameModel:
+    """A trunk 0.5 m long along +x, radius 0.1 m, with a joint at `trunk_joint` of its
+    length where it turns by `bend` degrees, carrying two straight legs 0.4 m long from
+    its end."""
+    points = _kinked(trunk_joint, bend, length=0.5, count=11)
+    trunk = Branch(-1, points, np.array([trunk_joint]), radius=0.1)
+    end = points[-1]
     legs = tuple(
-        Branch(0, np.linspace([0.5, 0.0, 0.0], [0.5, -0.4, side], 9), np.zeros(0), radius=0.05)
+        Branch(0, np.linspace(end, end + np.array([0.0, -0.4, side]), 9), np.zeros(0), radius=0.05)
         for side in (-0.1, 0.1)
     )
     return FrameModel(np.zeros(3), (trunk, *legs))
@@ -160,19 +175,60 @@ def test_a_trunk_joint_next_to_its_branching_node_becomes_the_trunks_end() -> No
     assert fit.model.link_count == 3
     assert fit.model.lengths[0] == pytest.approx(0.47)
     assert fit.branch_points[0][:, -1, 0] == pytest.approx(0.47)
-    mid = fit_sequence([_forked(0.5)] * 4)
+    mid = fit_sequence([_forked(0.5, bend=30.0)] * 4)
     assert mid.model.joints[0] == pytest.approx([0.5])
-    assert mid.branch_points[0][:, -1, 0] == pytest.approx(0.5)
+    assert mid.branch_points[0][:, -1] == pytest.approx(
+        np.tile(_kinked(0.5, 30.0, length=0.5)[-1], (4, 1))
+    )
 
 
 def test_a_leaf_drops_a_last_joint_in_its_round_tip() -> None:
-    # Joints at 0.5 and 0.97 of a 1 m leaf of radius 0.05 m ending at its curve's end:
-    # the last link would be 3 cm, shorter than the radius.
-    points = np.linspace([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 21)
+    # Joints at 0.5 (where it bends) and 0.97 of a 1 m leaf of radius 0.05 m ending at
+    # its curve's end: the last link would be 3 cm, shorter than the radius.
+    points = _kinked(0.5, 45.0)
     tipped = FrameModel(np.zeros(3), (Branch(-1, points, np.array([0.5, 0.97]), radius=0.05),))
     fit = fit_sequence([tipped] * 4)
     assert fit.model.joints[0] == pytest.approx([0.5])
-    assert fit.branch_points[0][:, -1, 1] == pytest.approx(1.0)
+    assert fit.branch_points[0][:, -1] == pytest.approx(np.tile(points[-1], (4, 1)))
+
+
+def _swinging(bends: np.ndarray, joints: list[np.ndarray], seed: int) -> list[FrameModel]:
+    """Frames of one 0.6 m branch that turns by `bends` (n,) degrees at 0.4 of its
+    length, swings about the root by up to 30 degrees and has per-frame skewness
+    `joints`; its curve points jitter by 3 mm."""
+    rng = np.random.default_rng(seed)
+    frames = []
+    for t, (bend, cuts) in enumerate(zip(bends, joints, strict=True)):
+        points = _kinked(0.4, bend, length=0.6, count=25)
+        swing = np.radians(30.0 * np.sin(2 * np.pi * t / len(bends)))
+        turn = np.array(
+            [[np.cos(swing), 0, np.sin(swing)], [0, 1, 0], [-np.sin(swing), 0, np.cos(swing)]]
+        )
+        points = points @ turn.T + rng.normal(0.0, 0.003, points.shape)
+        frames.append(FrameModel(np.zeros(3), (Branch(-1, points, cuts),)))
+    return frames
+
+
+def test_a_branch_that_never_bends_keeps_no_joint() -> None:
+    # The skewness test cut the straight, swinging branch once or twice in every frame,
+    # at random: the frames' count says one joint at least, but no link bends.
+    rng = np.random.default_rng(3)
+    joints = [np.sort(rng.uniform(0.1, 0.9, rng.integers(1, 3))) for _ in range(12)]
+    model = fit_sequence(_swinging(np.zeros(12), joints, seed=4)).model
+    assert len(model.joints[0]) == 0
+    assert model.link_count == 1
+
+
+def test_a_branch_gets_one_joint_where_it_bends() -> None:
+    # The branch bends at 0.4 of its length, by up to 40 degrees and back; the skewness
+    # test also cut its straight outer link in most frames (two joints most often).
+    rng = np.random.default_rng(5)
+    bends = 40.0 * np.abs(np.sin(np.pi * np.arange(12) / 12))
+    joints = [np.array([0.4 + rng.normal(0.0, 0.01), rng.uniform(0.55, 0.9)]) for _ in range(9)]
+    joints += [np.array([0.4])] * 3
+    model = fit_sequence(_swinging(bends, joints, seed=6)).model
+    assert len(model.joints[0]) == 1
+    assert model.joints[0][0] * model.lengths[0] == pytest.approx(0.24, abs=0.025)  # a voxel
 
 
 def test_posed_model_keeps_the_measured_directions() -> None:
