@@ -312,7 +312,8 @@ def _query(args: argparse.Namespace) -> int:
     try:
         dist, rows = store.query(markers, k=args.k, eps=args.eps)
     except QueryError as exc:
-        raise InputError(f"--{exc.source}", exc.problem) from exc
+        flag = f"-{exc.source}" if len(exc.source) == 1 else f"--{exc.source}"  # -k, --eps
+        raise InputError(flag, exc.problem) from exc
     by_id = {t.id: t for t in store.takes}
     hits = [
         {

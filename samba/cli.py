@@ -60,7 +60,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.run(args) or 0)
+        status = int(args.run(args) or 0)
+        sys.stdout.flush()  # a reader that left (`| head`) shows here, not at exit
+        return status
+    except BrokenPipeError:  # before OSError, its base class: output piped into `head`
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # for the exit flush
+        return 0
     except SambaError as exc:
         print(f"samba: error: {exc}", file=sys.stderr)
         return 1
@@ -71,9 +76,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("samba: interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:  # output piped into `head` and the like
-        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - stays open for interpreter exit
-        return 0
 
 
 if __name__ == "__main__":

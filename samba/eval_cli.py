@@ -251,6 +251,8 @@ def _load(files: Sequence[Path]) -> dict[Path, NamedPoses]:
 
 def _run(args: argparse.Namespace) -> int:
     if args.plots:
+        if Path(args.plots).exists() and not Path(args.plots).is_dir():
+            raise InputError("--plots", f"{args.plots} is a file; plots go into a folder")
         Path(args.plots).mkdir(parents=True, exist_ok=True)
     if args.json and not Path(args.json).resolve().parent.is_dir():
         raise InputError("--json", f"folder of {args.json} does not exist")

@@ -53,6 +53,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--db", help="use this pose store instead of building one")
     parser.add_argument(
         "--motion",
+        type=_motion,
         default="walk",
         help=f"built-in motion ({', '.join(MOTIONS)}) or a BVH file to play (default: walk)",
     )
@@ -68,6 +69,16 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--open", action="store_true", help="open the viewer in a browser")
     parser.add_argument("--seed", type=int, default=0, help="random seed")
     parser.set_defaults(run=run)
+
+
+def _motion(value: str) -> str:
+    """`--motion`: a built-in motion's name or an existing file, checked before the demo
+    builds anything."""
+    if value in MOTIONS or Path(value).is_file():
+        return value
+    raise argparse.ArgumentTypeError(
+        f"{value!r} is neither a built-in motion ({', '.join(MOTIONS)}) nor a BVH file"
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -53,6 +53,13 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+def _bind_error(kind: str, address: tuple[str, int], purpose: str, exc: OSError) -> ServiceError:
+    """The error for a `kind` ("udp", "http") socket that cannot be bound to `address`
+    (host, port): names the address, what it was for, and the system's reason."""
+    reason = os.strerror(exc.errno) if exc.errno else str(exc)
+    return ServiceError(f"{kind} {address[0]}:{address[1]}", f"cannot {purpose} there: {reason}")
+
+
 class LiveServer:
     """A capture server with its sockets; use `async with LiveServer(...) as server:`.
 
@@ -109,7 +116,10 @@ class LiveServer:
             CaptureServer, self._configs, self._takes_dir, self._key, self.hub, pipelines
         )
         try:
-            self._udp = UdpInput(*self._udp_bind, self._on_datagram)
+            try:
+                self._udp = UdpInput(*self._udp_bind, self._on_datagram)
+            except OSError as exc:
+                raise _bind_error("udp", self._udp_bind, "receive camera packets", exc) from exc
             self._udp.start()
             self._flusher = asyncio.create_task(self._flush_takes())
             if self._http_bind is not None:
@@ -127,7 +137,10 @@ class LiveServer:
         self._runner = web.AppRunner(app, access_log=None)
         await self._runner.setup()
         site = web.TCPSite(self._runner, host, port)
-        await site.start()
+        try:
+            await site.start()
+        except OSError as exc:
+            raise _bind_error("http", (host, port), "serve the viewer and API", exc) from exc
         bound = self._runner.addresses[0]
         self.http_address = (bound[0], bound[1])
 

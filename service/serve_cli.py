@@ -189,10 +189,14 @@ def _print_summary(metrics: dict, takes: list) -> None:
     )
     for name, m in metrics["sessions"].items():
         sync, latency = m["sync"], m["latency"]
-        print(
-            f"  session {name}: {m['frames_out']} frames out ({sync['complete']} complete, "
-            f"{sync['partial']} partial, {sync['skipped']} skipped: too few cameras); latency "
-            f"p50 {latency['p50_ms']} ms, p99 {latency['p99_ms']} ms"
+        frames = f"{sync['complete']} complete, {sync['partial']} partial"
+        if m["labels"] is not None:  # a marker session: cameras make its frames
+            frames += f", {sync['skipped']} skipped: too few cameras"
+        timing = (
+            f"latency p50 {latency['p50_ms']} ms, p99 {latency['p99_ms']} ms"
+            if latency["p50_ms"] is not None
+            else "no latency: no frame came"
         )
+        print(f"  session {name}: {m['frames_out']} frames out ({frames}); {timing}")
     for take in takes:
         print(f"  take {take.name}: {take.frames} frames -> {Path(take.path)}")

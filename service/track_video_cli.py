@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         [frame for _, frame in empty], view.size[0], method=args.method
     )
     try:
-        seconds, held = _track(frames, extractor, SilhouetteTracker(tree), out, args.fps)
+        seconds, held = _track(frames, extractor, SilhouetteTracker(tree), out, args)
     except BaseException:
         out.unlink(missing_ok=True)
         raise
@@ -94,11 +94,14 @@ def _track(
     extractor: SilhouetteExtractor,
     tracker: SilhouetteTracker,
     out: Path,
-    fps: float,
+    args: argparse.Namespace,
 ) -> tuple[list[float], int]:
-    """Track every frame from the first with somebody in view, writing the take to
-    `out`; returns the seconds each tracked frame took and how many held the pose."""
+    """Track every frame of `args.video` from the first with somebody in view, writing
+    the take to `out` at `args.fps`; returns the seconds each tracked frame took and how
+    many held the pose. A silhouette the tracker cannot place (it does not stand on the
+    floor) raises InputError naming the video and the frame."""
     size = tracker.tree.view.size
+    fps = args.fps
     seconds, held = [], 0
     with TakeRecorder(out, fps) as recorder:
         for number, frame in frames:
@@ -108,7 +111,15 @@ def _track(
                 continue  # nobody in view yet
             if mask.shape != size[::-1]:
                 mask = downsampled(mask, size)
-            estimate = tracker.step(mask)
+            try:
+                estimate = tracker.step(mask)
+            except InputError as exc:
+                empty = "--background" if args.background else f"--empty-frames {args.empty_frames}"
+                raise InputError(
+                    args.video,
+                    f"frame {number}: the silhouette cannot be placed ({exc.problem}); is the "
+                    f"empty stage ({empty}) free of people and of the same view?",
+                ) from exc
             seconds.append(time.perf_counter() - start)
             held += not estimate.found
             recorder.write_frame(

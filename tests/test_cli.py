@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -165,6 +166,33 @@ def test_wrong_flag_exits_2_without_traceback(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert "unrecognized arguments: --bogus" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_output_into_a_reader_that_left_ends_quietly(store_with_cmu: Path) -> None:
+    # `samba db ls STORE | head -1`: head exits after one line; samba must not print
+    # "Broken pipe" or a traceback, and exits 0. Here the reader is gone before the start.
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        result = subprocess.run(
+            [sys.executable, "-m", "samba.cli", "db", "ls", str(store_with_cmu)],
+            stdout=write,
+            stderr=subprocess.PIPE,
+            text=True,
+            timeout=120,
+        )
+    finally:
+        os.close(write)
+    assert result.returncode == 0
+    assert result.stderr == ""
+
+
+def test_an_unknown_demo_motion_is_refused_before_anything_is_built(tmp_path: Path, capsys) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        main(["demo", "--motion", "dance", "--out", str(tmp_path / "demo")])
+    assert exit_.value.code == 2
+    assert "'dance' is neither a built-in motion" in capsys.readouterr().err
+    assert not (tmp_path / "demo").exists()
 
 
 def test_demo_captures_live_and_writes_the_take_and_exports(tmp_path: Path, capsys) -> None:

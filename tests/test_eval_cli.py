@@ -126,6 +126,15 @@ def test_eval_input_errors_name_the_input(picked, tmp_path: Path, capsys) -> Non
     code, _, err = run(capsys, "eval", "--train", *picked, "--test", str(empty))
     assert code == 1 and "--test" in err and "no .bvh files" in err
 
+    a_file = tmp_path / "plots.txt"
+    a_file.write_text("not a folder")
+    code, _, err = run(
+        capsys, "eval", "--train", *picked, "--test", picked[0], "--plots", str(a_file)
+    )
+    assert (
+        code == 1 and f"--plots: {a_file} is a file" in err and len(err.strip().splitlines()) == 1
+    )
+
 
 def synthetic(seed: int) -> tuple[str, np.ndarray]:
     """A 3 s synthetic walk at 30 fps, named after its seed."""

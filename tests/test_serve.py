@@ -4,6 +4,7 @@ bundles, the recorded take, the control API and `samba serve` out."""
 from __future__ import annotations
 
 import asyncio
+import re
 import socket
 import subprocess
 import sys
@@ -16,6 +17,7 @@ from aiohttp import ClientSession
 from live_fixtures import VmcReceiver, config, offline_poses, until
 
 from ingest.mcap_take import read_take
+from service.errors import ServiceError
 from service.packet import encode
 from service.serve import LiveServer
 from service.session_config import read_sessions
@@ -175,6 +177,32 @@ def test_the_api_is_not_exposed_without_a_token(live_store: Path, live_calibrati
         LiveServer([config(live_calibration, live_store)], "takes", http=("0.0.0.0", 8080))
 
 
+def test_a_port_already_in_use_is_named(
+    live_store: Path, live_calibration: Path, tmp_path: Path
+) -> None:
+    cfg = config(live_calibration, live_store)
+
+    async def serve(udp: tuple[str, int], http: tuple[str, int] | None) -> None:
+        async with LiveServer([cfg], tmp_path, udp=udp, http=http):
+            pass
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        wanted = (
+            f"udp 127.0.0.1:{port}: cannot receive camera packets there: Address already in use"
+        )
+        with pytest.raises(ServiceError, match=re.escape(wanted)):
+            asyncio.run(serve(("127.0.0.1", port), None))
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        wanted = f"http 127.0.0.1:{port}: cannot serve the viewer and API there: Address already"
+        with pytest.raises(ServiceError, match=re.escape(wanted)):
+            asyncio.run(serve(("127.0.0.1", 0), ("127.0.0.1", port)))
+
+
 def test_samba_serve_command(live_store: Path, live_calibration: Path, tmp_path: Path) -> None:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))
@@ -186,6 +214,7 @@ def test_samba_serve_command(live_store: Path, live_calibration: Path, tmp_path:
     assert done.returncode == 0, done.stderr
     assert f"camera packets on udp 127.0.0.1:{port}" in done.stdout
     assert "take first: 0 frames" in done.stdout
+    assert "no latency: no frame came" in done.stdout
     assert (tmp_path / "takes" / "default" / "first.mcap").is_file()
     bad = subprocess.run(
         [

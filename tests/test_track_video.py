@@ -314,6 +314,15 @@ def test_an_unknown_body_is_refused(stage: Stage, tmp_path: Path) -> None:
     assert not out.exists()
 
 
+def test_an_empty_stage_with_somebody_on_it_is_named(stage: Stage, tmp_path: Path) -> None:
+    # The video starts with the subject in view: the background learnt from its first
+    # frames holds the subject, and the silhouettes do not stand on the floor.
+    out = tmp_path / "wave.mcap"
+    code, _, err = track(stage, stage.frames, out, "--empty-frames", "5")
+    _assert_one_line_error(code, err, stage.frames, "frame ", "(--empty-frames 5) free of people")
+    assert not out.exists()
+
+
 def test_a_video_nobody_walks_into_is_refused(stage: Stage, tmp_path: Path) -> None:
     out = tmp_path / "wave.mcap"
     code, _, err = track(stage, stage.empty, out, "--background", stage.empty)
