@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from samba.errors import InputError
+from samba.frame_source import open_video
 
 IMAGE_EXTENSIONS = (".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg", ".pgm", ".ppm")
 """File name extensions `read_frames` takes as images in a folder."""
@@ -98,10 +99,8 @@ def read_frames(path: str | Path, grey: bool = True) -> np.ndarray:
 
 
 def _read_video(path: Path) -> list[np.ndarray]:
-    capture = cv2.VideoCapture(str(path))
+    capture = open_video(path)
     try:
-        if not capture.isOpened():
-            raise InputError(str(path), "OpenCV cannot open this file as a video")
         frames = []
         while True:
             ok, frame = capture.read()

@@ -10,6 +10,7 @@ path, an empty folder, an unreadable image or video, images of different sizes) 
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -64,10 +65,8 @@ class FrameSource:
                     raise InputError(str(self.images[number]), "cannot be read as an image")
                 yield number, image, self.images[number]
             return
-        capture = cv2.VideoCapture(str(self.path))
+        capture = open_video(self.path)
         try:
-            if not capture.isOpened():
-                raise InputError(str(self.path), "cannot be opened as a video")
             number = 0
             while capture.grab():
                 if number % every == 0:
@@ -80,6 +79,19 @@ class FrameSource:
                 raise InputError(str(self.path), "no frame of the video can be read")
         finally:
             capture.release()
+
+
+def open_video(path: str | Path) -> cv2.VideoCapture:
+    """An opened OpenCV capture of the video file `path` (the caller releases it);
+    InputError naming the file when OpenCV cannot open it. FFmpeg's own messages
+    ("moov atom not found" ...) are silenced (`OPENCV_FFMPEG_LOGLEVEL`, unless set
+    already): the error says it once."""
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
+    capture = cv2.VideoCapture(str(path))
+    if not capture.isOpened():
+        capture.release()
+        raise InputError(str(path), "cannot be opened as a video")
+    return capture
 
 
 def open_frames(path: str | Path) -> FrameSource:

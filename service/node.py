@@ -42,7 +42,7 @@ import numpy as np
 from samba.camera import Camera
 from samba.camera_chain import EMPTY_STAGE_FRAMES
 from samba.errors import InputError
-from samba.frame_source import FrameSource
+from samba.frame_source import FrameSource, open_video
 from samba.lead_in import LeadIn, standing_lead_in
 from samba.marker_detection import detect_markers, static_mask
 from samba.marker_render import RenderOptions, film_empty_stage, render_camera
@@ -547,10 +547,8 @@ class _Tally:
 
 def _video_fps(path: Path) -> float:
     """The frame rate a video file gives; InputError when it cannot be opened or has none."""
-    capture = cv2.VideoCapture(str(path))
+    capture = open_video(path)
     try:
-        if not capture.isOpened():
-            raise InputError(str(path), "cannot be opened as a video")
         fps = capture.get(cv2.CAP_PROP_FPS)
     finally:
         capture.release()

@@ -8,6 +8,8 @@ poses (frames 1..20).
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -247,6 +249,17 @@ def test_cli_errors(scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[
     assert main(["calibrate", str(good), "--board", BOARD, "-o", str(tmp_path / "no/c.toml")]) == 1
     assert "does not exist" in capsys.readouterr().err
     assert not Path(out).exists()
+
+
+def test_a_file_that_is_not_a_video_gives_one_line_and_no_ffmpeg_noise(tmp_path: Path) -> None:
+    # FFmpeg prints its own "moov atom not found" on stderr unless silenced.
+    fake = tmp_path / "fake.mp4"
+    fake.write_text("not a video")
+    argv = [sys.executable, "-m", "samba.cli", "calibrate", str(fake), "--board", BOARD]
+    out = str(tmp_path / "c.toml")
+    done = subprocess.run([*argv, "-o", out], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 1
+    assert done.stderr.splitlines() == [f"samba: error: {fake}: cannot be opened as a video"]
 
 
 def test_cameras_in_the_group_keep_their_order(scene: Scene) -> None:
