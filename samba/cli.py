@@ -42,13 +42,30 @@ AREAS: dict[str, tuple[str, str]] = {
 """Subcommand -> (module with `register(parser)`, one-line help)."""
 
 
+class _CommandParser(argparse.ArgumentParser):
+    """A subcommand's parser: arguments it does not know are its error, printed with its
+    own usage (`samba db import: error: unrecognized arguments: ...`), not the top-level
+    parser's."""
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        """Parse `args`; exit 2 with this parser's usage on any it does not know."""
+        parsed, extras = super().parse_known_args(args, namespace)
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed, extras
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with every area's subcommands."""
     parser = argparse.ArgumentParser(
         prog="samba",
         description="Samba: low-cost real-time motion capture from eight markers.",
     )
-    sub = parser.add_subparsers(dest="area", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(
+        dest="area", required=True, metavar="COMMAND", parser_class=_CommandParser
+    )
     for name, (module, help_text) in AREAS.items():
         area = sub.add_parser(name, help=help_text, description=help_text)
         importlib.import_module(module).register(area)

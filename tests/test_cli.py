@@ -164,7 +164,8 @@ def test_wrong_flag_exits_2_without_traceback(tmp_path: Path) -> None:
         timeout=120,
     )
     assert result.returncode == 2
-    assert "unrecognized arguments: --bogus" in result.stderr
+    assert "samba db ls: error: unrecognized arguments: --bogus" in result.stderr
+    assert result.stderr.startswith("usage: samba db ls ")  # the subcommand's usage
     assert "Traceback" not in result.stderr
 
 
