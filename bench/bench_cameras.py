@@ -90,7 +90,11 @@ def time_triangulation(frames: int, repeats: int = 3) -> float:
     return len(poses) / best
 
 
-def bench(frames: int, resolutions=RESOLUTIONS, triangulation_frames: int = 10_000):
+def bench(
+    frames: int,
+    resolutions: tuple[tuple[int, int], ...] = RESOLUTIONS,
+    triangulation_frames: int = 10_000,
+) -> tuple[list[list[str]], float]:
     """Measure and print both tables; returns (camera rows, triangulation frames/s)."""
     poses = generate("jumping_jacks", seconds=frames / 30, fps=30, seed=1).poses
     rows = []

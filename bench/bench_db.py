@@ -28,6 +28,7 @@ import re
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -71,7 +72,7 @@ def rss_mb() -> float:
     return kb / 1024
 
 
-def best_of(repeats: int, fn) -> float:
+def best_of(repeats: int, fn: Callable[[], object]) -> float:
     """The shortest wall time (seconds) of `repeats` calls of fn() (timeit's convention)."""
     times = []
     for _ in range(repeats):
@@ -135,7 +136,7 @@ def grow(poses: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     return np.concatenate(parts)[:n].astype(np.float32)
 
 
-def latencies(fn, queries: np.ndarray) -> tuple[float, float]:
+def latencies(fn: Callable[[np.ndarray], object], queries: np.ndarray) -> tuple[float, float]:
     """Median and 99th percentile (microseconds) of fn(query) over single queries."""
     times = []
     for q in queries:
@@ -146,7 +147,7 @@ def latencies(fn, queries: np.ndarray) -> tuple[float, float]:
     return float(np.median(us)), float(np.percentile(us, 99))
 
 
-def throughput(fn, queries: np.ndarray) -> float:
+def throughput(fn: Callable[[np.ndarray], object], queries: np.ndarray) -> float:
     """Queries per second of fn(batch)."""
     t0 = time.perf_counter()
     fn(queries)

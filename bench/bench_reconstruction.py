@@ -31,6 +31,7 @@ from db.index import PoseIndex  # noqa: E402
 from ingest.bvh_take import load_bvh_take  # noqa: E402
 from samba.evaluation import capture_take  # noqa: E402
 from samba.methods import METHODS  # noqa: E402
+from samba.reconstruction import Reconstructor  # noqa: E402
 from samba.skeleton import mirror_poses  # noqa: E402
 from samba.synthetic import generate, library  # noqa: E402
 
@@ -54,7 +55,7 @@ def database_and_test(max_frames: int) -> tuple[str, np.ndarray, np.ndarray]:
     return "synthetic motions (no CMU data found)", database, capture_take("t", test, 0).markers
 
 
-def time_live(reconstructor, markers: np.ndarray) -> np.ndarray:
+def time_live(reconstructor: Reconstructor, markers: np.ndarray) -> np.ndarray:
     """Seconds per frame (F,) of `step`, frame by frame, after a 20-frame warm-up."""
     for frame in markers[:20]:
         reconstructor.step(frame)
@@ -67,7 +68,7 @@ def time_live(reconstructor, markers: np.ndarray) -> np.ndarray:
     return seconds
 
 
-def time_batch(reconstructor, markers: np.ndarray, repeats: int = 3) -> float:
+def time_batch(reconstructor: Reconstructor, markers: np.ndarray, repeats: int = 3) -> float:
     """Frames per second of `reconstruct` on the whole sequence (best of `repeats`)."""
     best = np.inf
     for _ in range(repeats):
