@@ -184,7 +184,7 @@ def test_a_port_already_in_use_is_named(
 
     async def serve(udp: tuple[str, int], http: tuple[str, int] | None) -> None:
         async with LiveServer([cfg], tmp_path, udp=udp, http=http):
-            pass
+            raise AssertionError("the server started on a port in use")
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
         taken.bind(("127.0.0.1", 0))
