@@ -56,6 +56,12 @@ UP_AXES: dict[str, np.ndarray | None] = {
 (None: the same axes)."""
 METADATA = "metadata"
 """The table that is not a camera."""
+MAX_IMAGE_SIDE = 32768
+"""Largest image width or height (pixels) a camera table may give: past 8K video, and
+far short of a size whose frames could not be allocated."""
+MAX_TRANSLATION_M = 10_000.0
+"""Largest translation component (meters) a camera table may give: a stage is meters
+across; a value like 1e308 is a broken file whose projections overflow."""
 
 PathLike = str | os.PathLike[str]
 
@@ -177,15 +183,26 @@ def _camera(
     if table.get("fisheye", False) is not False:
         raise fail("fisheye", "fisheye lenses are not supported (OpenCV's pinhole model only)")
     size = _numbers(table["size"], (2,), lambda p: fail("size", p))
-    if not all(s >= 1 and s == int(s) for s in size):
-        raise fail("size", f"must be two positive whole numbers [width, height], got {size}")
+    if not all(1 <= s <= MAX_IMAGE_SIDE and s == int(s) for s in size):
+        raise fail(
+            "size",
+            f"must be two positive whole numbers of pixels [width, height], at most "
+            f"{MAX_IMAGE_SIDE}, got {[float(v) for v in size]}",
+        )
     matrix = _numbers(table["matrix"], (3, 3), lambda p: fail("matrix", p))
+    if not (matrix[0, 0] > 0 and matrix[1, 1] > 0):
+        raise fail(
+            "matrix",
+            f"focal lengths fx, fy must be positive pixels, got {matrix[0, 0]:g}, {matrix[1, 1]:g}",
+        )
     distortions = table["distortions"]
     if not (isinstance(distortions, list) and len(distortions) in (4, 5)):
         raise fail("distortions", f"must be 4 or 5 numbers (k1 k2 p1 p2 [k3]), got {distortions!r}")
     distortion = _numbers(distortions, (len(distortions),), lambda p: fail("distortions", p))
     rotation = _numbers(table["rotation"], (3,), lambda p: fail("rotation", p))
     translation = _numbers(table["translation"], (3,), lambda p: fail("translation", p))
+    if np.abs(translation * scale).max() > MAX_TRANSLATION_M:
+        raise fail("translation", f"more than {MAX_TRANSLATION_M:g} m from the world origin")
     if matrix[2, 2] == 0:
         raise fail("matrix", "the last element is 0")
     return Camera(
