@@ -49,6 +49,9 @@ from samba.take import Take
 CATALOG = "catalog.sqlite"
 INDEX = "index.npz"
 POSE_BYTES = N_JOINTS * 3 * 4
+MAX_COORDINATE_M = 10_000.0
+"""Largest joint coordinate (meters) sound pose data holds; beyond it (or NaN) the data
+file is damaged (`PoseStore.check_poses`)."""
 ROW_BYTES = 2 * 4
 
 
@@ -226,9 +229,28 @@ class PoseStore:
         return hits[0]
 
     def take_poses(self, ref: int | str) -> np.ndarray:
-        """The poses (frame_count, 13, 3) float32 of one take, meters."""
+        """The poses (frame_count, 13, 3) float32 of one take, meters; StoreError naming
+        the data file when they are damaged (`check_poses`)."""
         info = self.take(ref)
-        return np.asarray(self.poses[info.first_row : info.first_row + info.frame_count])
+        poses = np.asarray(self.poses[info.first_row : info.first_row + info.frame_count])
+        self._check_sound(poses, f"take {info.id} ({info.name!r})")
+        return poses
+
+    def check_poses(self) -> None:
+        """StoreError naming the data file when the committed poses hold NaN, infinity or
+        a coordinate beyond `MAX_COORDINATE_M` (damage that `verify` details): searching,
+        indexing or importing into such a store would fail or mislead."""
+        self._check_sound(np.asarray(self.poses), "pose data")
+
+    def _check_sound(self, poses: np.ndarray, what: str) -> None:
+        with np.errstate(invalid="ignore"):
+            sound = np.abs(poses) <= MAX_COORDINATE_M  # False for NaN
+        if not sound.all():
+            raise StoreError(
+                str(self.path / f"poses-{self.data_name}.f32"),
+                f"{what} damaged: {np.count_nonzero(~sound)} values NaN, infinite or beyond "
+                f"{MAX_COORDINATE_M:g} m; run `samba db verify {self.path}`",
+            )
 
     @property
     def index(self) -> PoseIndex:
@@ -238,6 +260,7 @@ class PoseStore:
                 raise StoreError(str(self.path), "the store holds no poses to search")
             index = self._load_saved_index()
             if index is None:
+                self.check_poses()
                 index = PoseIndex.build(
                     self.poses, generation=self.generation, scale_by_tibia=self.scale_by_tibia
                 )
@@ -522,7 +545,9 @@ class PoseStore:
         return self.take(take_id)
 
     def build_index(self) -> PoseIndex:
-        """Build the index for the current snapshot and save it (under the lock)."""
+        """Build the index for the current snapshot and save it (under the lock);
+        StoreError when the pose data is damaged (`check_poses`)."""
+        self.check_poses()
         index = PoseIndex.build(
             self.poses, generation=self.generation, scale_by_tibia=self.scale_by_tibia
         )

@@ -37,8 +37,8 @@ def load_take(ref: str, store: str | None = None) -> Take:
 
 def _store_take(store: PoseStore, ref: str) -> Take:
     info = store.take(ref)
+    poses = store.take_poses(info.id).astype(np.float64)  # StoreError when damaged
     rows = slice(info.first_row, info.first_row + info.frame_count)
-    poses = np.asarray(store.poses[rows], dtype=np.float64)
     frames = np.asarray(store.frames[rows], dtype=np.int64)
     full = np.arange(frames[0], frames[-1] + 1)
     if len(full) != len(frames):

@@ -11,10 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bvh_fixtures import humanoid_bvh
 
 from db.errors import StoreCorruptedError, StoreError
 from db.index import PoseIndex
 from db.store import CATALOG, INDEX, POSE_BYTES, ROW_BYTES, PoseStore, drop_near_duplicates
+from ingest.batch import import_paths
 from samba.perturb import perturb_joint_angles
 from samba.skeleton import Body, markers_of, mirror_poses
 from samba.take import Take
@@ -352,6 +354,32 @@ def test_verify_detects_flipped_pose_bytes(store: PoseStore, path: Path) -> None
     assert "checksum mismatch" in report.problems[0]
     with pytest.raises(StoreCorruptedError, match="checksum mismatch"):
         PoseStore.open(path).verify_or_raise()
+
+
+@pytest.mark.parametrize("value", [np.nan, 3e38])
+def test_damaged_pose_values_are_refused_by_search_import_and_export(
+    store: PoseStore, path: Path, value: float
+) -> None:
+    # A NaN or an absurd coordinate in take "b" (rows 30..49): the index's PCA would fail
+    # (LinAlgError) or search garbage, so every user of the data names the file instead.
+    with open(path / "poses-0.f32", "r+b") as fh:
+        fh.seek(35 * POSE_BYTES + 8)
+        fh.write(np.full(3, value, dtype=np.float32).tobytes())
+    (path / INDEX).unlink()
+    damaged = PoseStore.open(path)
+    for use in (damaged.check_poses, damaged.build_index, lambda: damaged.index):
+        with pytest.raises(StoreError, match="pose data damaged: 3 values") as err:
+            use()
+        assert "poses-0.f32" in str(err.value) and "samba db verify" in str(err.value)
+    with pytest.raises(StoreError, match=r"take 2 \('b'\) damaged"):
+        damaged.take_poses("b")
+    assert damaged.take_poses("a").shape == (30, 13, 3)  # sound takes still read
+    before = snapshot_files(path)
+    with pytest.raises(StoreError, match="pose data damaged"):
+        bvh = path.parent / "x.bvh"
+        bvh.write_text(humanoid_bvh())
+        import_paths(damaged, [bvh], progress=False)
+    assert snapshot_files(path) == before  # nothing written into the damaged store
 
 
 def test_verify_detects_rows_that_name_another_take(store: PoseStore, path: Path) -> None:
