@@ -26,6 +26,8 @@ from samba.silhouette_view import SilhouetteView
 
 FORMAT = "samba-shape-tree/1"
 TREES_FOLDER = "shape_trees"
+ZIP_MAGIC = b"PK\x03\x04"
+"""The first bytes of an .npz archive (a zip file)."""
 _LEVEL_ARRAYS = ("offsets", "starts", "ends", "poses", "floor_offsets", "visibility", "parents")
 
 
@@ -75,6 +77,9 @@ def read_shape_tree(path: str | Path) -> ShapeTree:
     shape tree, of another format version or damaged."""
     path = Path(path)
     try:
+        with open(path, "rb") as file:
+            if file.read(4) != ZIP_MAGIC:  # np.load would take it for a pickle and say so
+                raise StoreError(str(path), "damaged shape tree: not an .npz archive")
         with np.load(path, allow_pickle=False) as archive:
             header = json.loads(bytes(archive["header"]).decode())
             if header.get("format") != FORMAT:
@@ -107,7 +112,22 @@ def _tree(header: dict, arrays: dict[str, np.ndarray]) -> ShapeTree:
             arrays[f"level{i}_{key}"] for key in _LEVEL_ARRAYS
         )
         runs = SilhouetteRuns(tuple(size), offsets, starts, ends)
-        if len(runs) != len(poses) or runs.offsets[-1] != len(runs.starts):
+        if len(runs) != len(poses):
             raise ValueError(f"level {i}: {len(runs)} silhouettes for {len(poses)} poses")
+        if runs.offsets[-1] != len(runs.starts):
+            raise ValueError(
+                f"level {i}: run offsets end at {runs.offsets[-1]}, not at the "
+                f"{len(runs.starts)} runs"
+            )
+        for name, values in (
+            ("poses", poses),
+            ("floor offsets", floor_offsets),
+            ("visibility", visibility),
+        ):
+            if not np.isfinite(values).all():
+                raise ValueError(f"level {i}: {name} hold NaN or infinity")
+        above = len(levels[-1].poses) if levels else 0
+        if len(parents) != len(poses) or (i and not ((parents >= 0) & (parents < above)).all()):
+            raise ValueError(f"level {i}: parents must name one of the {above} nodes above")
         levels.append(TreeLevel(runs, poses, floor_offsets, visibility, parents))
     return ShapeTree(view, body, tuple(levels))

@@ -4,6 +4,7 @@ tree of `silhouette_fixtures`."""
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 from pathlib import Path
 
@@ -188,9 +189,29 @@ def _header_only(good: bytes, path: Path) -> None:
         np.savez(file, header=np.frombuffer(header, dtype=np.uint8))
 
 
+def _changed(path: Path, good: bytes, key: str, change) -> None:
+    """The tree `good` with the array `key` replaced by `change(array)`."""
+    with np.load(io.BytesIO(good)) as archive:
+        arrays = {k: archive[k] for k in archive.files}
+    arrays[key] = change(arrays[key])
+    with path.open("wb") as file:
+        np.savez(file, **arrays)
+
+
+def _nan_poses(good: bytes, path: Path) -> None:
+    _changed(path, good, "level2_poses", lambda a: np.full_like(a, np.nan))
+
+
+def _parent_out_of_range(good: bytes, path: Path) -> None:
+    _changed(path, good, "level2_parents", lambda a: np.where(np.arange(len(a)) == 5, 10**6, a))
+
+
 @pytest.mark.parametrize(
     ("damage", "problem"),
     [
+        (_nan_poses, "level 2: poses hold NaN"),
+        (_parent_out_of_range, "level 2: parents must name one of the"),
+        (_garbage, "not an .npz archive"),
         (_truncated, "damaged"),
         (_emptied, "damaged"),
         (_flipped, "damaged"),
