@@ -71,7 +71,9 @@ def read_glb(path: str | os.PathLike[str]) -> GlbDocument:
 def _parse_glb(data: bytes, source: str) -> tuple[dict[str, Any], bytes]:
     """The JSON document and the binary chunk (b"" if none) of a GLB container."""
     if len(data) < 20 or data[:4] != _MAGIC:
-        raise ExportError(source, "not a binary glTF (.glb) file")
+        raise ExportError(
+            source, "not a binary glTF (.glb) file: avatars are read from .glb or .vrm files"
+        )
     version, length = struct.unpack_from("<II", data, 4)
     if version != 2:
         raise ExportError(source, f"glTF container version {version} is not supported (need 2)")

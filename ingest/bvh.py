@@ -338,7 +338,9 @@ def _parse_motion_header(
         values[key] = (value.strip(), line_no)
     (frames_text, frames_line), (time_text, time_line) = values["frames"], values["frame time"]
     if not (frames_text.isascii() and frames_text.isdigit()):
-        raise BvhError(source, f"frame count {frames_text!r} is not an integer", frames_line)
+        raise BvhError(
+            source, f"frame count {frames_text!r} is not a whole number of frames", frames_line
+        )
     frames = int(frames_text)
     if frames <= 0:
         raise BvhError(source, "the file has no frames (Frames: 0)", frames_line)

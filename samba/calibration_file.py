@@ -180,7 +180,10 @@ def _camera(
     name = table["name"]
     if not isinstance(name, str) or not name:
         raise fail("name", f"must be a non-empty string, got {name!r}")
-    if table.get("fisheye", False) is not False:
+    fisheye = table.get("fisheye", False)
+    if not isinstance(fisheye, bool):
+        raise fail("fisheye", f"must be true or false, got {fisheye!r}")
+    if fisheye:
         raise fail("fisheye", "fisheye lenses are not supported (OpenCV's pinhole model only)")
     size = _numbers(table["size"], (2,), lambda p: fail("size", p))
     if not all(1 <= s <= MAX_IMAGE_SIDE and s == int(s) for s in size):

@@ -456,10 +456,10 @@ def test_frames_says_fewer_than_present(walk) -> None:
     ("frames", "problem"),
     [
         ("Frames: 0", "no frames"),
-        ("Frames: -3", "not an integer"),
-        ("Frames: 2.5", "not an integer"),
-        ("Frames: ²", "not an integer"),
-        ("Frames:", "not an integer"),
+        ("Frames: -3", "not a whole number of frames"),
+        ("Frames: 2.5", "not a whole number of frames"),
+        ("Frames: ²", "not a whole number of frames"),
+        ("Frames:", "not a whole number of frames"),
         ("Frame: 12", "expected 'Frames: ...'"),
     ],
 )

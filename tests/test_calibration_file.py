@@ -227,6 +227,7 @@ def _file(tmp_path: Path, **changes: str | None) -> Path:
         ("translation", "3.0", "3 numbers"),
         ("translation", "[0.0, 0.0, 1e308]", "more than 10000 m"),
         ("fisheye", "true", "not supported"),
+        ("fisheye", '"no"', "must be true or false"),
     ],
 )
 def test_bad_fields_name_the_file_table_and_field(
