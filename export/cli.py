@@ -93,6 +93,8 @@ def run(args: argparse.Namespace) -> int:
     for ref, out in bar:
         try:
             take = load_take(ref, args.db)
+            for warning in take.warnings:  # a recovered take says what it lost
+                tqdm.write(f"samba: warning: {ref}: {warning}", file=sys.stderr)
             poses = take.poses[frames]
             if len(poses) == 0:
                 raise ExportError(

@@ -15,6 +15,7 @@ from typing import BinaryIO
 import numpy as np
 from mcap.records import Channel, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader
+from mcap.writer import MCAP0_MAGIC
 
 from ingest.errors import TakeFileError
 from samba.skeleton import N_JOINTS
@@ -68,7 +69,12 @@ def read_take(path: str | Path) -> Take:
     if not 0 < fps < float("inf"):
         raise TakeFileError(source, f"take metadata has no valid fps: {meta.get('fps')!r}")
     warnings = []
-    if cut is not None:
+    if cut is not None and _ends_whole(path):
+        warnings.append(
+            f"file damaged inside ({cut}): recovered the {len(poses)} frames before the "
+            "damaged chunk; the frames after it are lost"
+        )
+    elif cut is not None:
         warnings.append(
             f"file cut short (no MCAP footer; the recorder was killed?): recovered {len(poses)} "
             f"frames up to the last complete chunk ({cut})"
@@ -82,6 +88,14 @@ def read_take(path: str | Path) -> Take:
         warnings=warnings,
         meta={"start_time": meta.get("start_time", ""), "format": "mcap"},
     )
+
+
+def _ends_whole(path: Path) -> bool:
+    """Whether the file ends with MCAP's closing magic bytes: written to the end, so a
+    record that stopped the reading is damage inside it, not a cut."""
+    with path.open("rb") as stream:
+        stream.seek(max(path.stat().st_size - len(MCAP0_MAGIC), 0))
+        return stream.read() == MCAP0_MAGIC
 
 
 class _RecordStream:

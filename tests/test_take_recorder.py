@@ -166,6 +166,33 @@ def test_a_file_cut_anywhere_gives_a_prefix_of_the_take(
     assert recovered == sorted(recovered) and recovered[0] > 0 and recovered[-1] <= len(take)
 
 
+def test_a_file_damaged_inside_is_told_from_one_cut_short(
+    recording: Path, take: Take, tmp_path: Path
+) -> None:
+    # One flipped bit in the middle of a whole file (its closing magic intact): the
+    # chunk no longer decompresses (or fails its CRC), the frames before it come back,
+    # and the warning says damage, not a cut.
+    data = bytearray(recording.read_bytes())
+    data[len(data) // 2] ^= 0x10
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    back = read_take(damaged)
+    assert 0 < len(back) < len(take) and np.array_equal(back.poses, take.poses[: len(back)])
+    (warning,) = back.warnings
+    assert warning.startswith("file damaged inside (") and "cut short" not in warning
+    assert f"recovered the {len(back)} frames before the damaged chunk" in warning
+
+
+def test_exporting_a_recovered_take_warns_what_it_lost(
+    recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(recording.read_bytes()[: recording.stat().st_size // 2])
+    assert main(["export", str(cut), "-o", str(tmp_path / "cut.glb")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith(f"samba: warning: {cut}: file cut short") and "recovered" in err
+
+
 KILLED_RECORDER = f"""
 import sys, time
 from samba.reconstruction import PoseEstimate
