@@ -162,9 +162,12 @@ class PoseStore:
             try:
                 self._load_snapshot()
                 return
-            except FileNotFoundError:
+            except FileNotFoundError as exc:
+                missing = exc.filename
                 time.sleep(0.05)  # a writer switched data files between our reads
-        raise StoreError(str(self.path), "data files keep disappearing; is a writer looping?")
+        raise StoreError(
+            str(missing), "missing: the store's data file is gone (or a writer keeps replacing it)"
+        )
 
     def _load_snapshot(self) -> None:
         conn = self._connect()

@@ -124,10 +124,16 @@ class _RecordStream:
 
 def _pose(message: Message, source: str, index: int) -> np.ndarray:
     """The (13, 3) joints of a `/pose_raw` message, float32 meters."""
+    where = f"/pose_raw message {index}"
     try:
-        joints = np.array(json.loads(message.data)["joints"], dtype=np.float32)
-    except (ValueError, KeyError, TypeError) as exc:
-        raise TakeFileError(source, f"/pose_raw message {index} is malformed: {exc}") from exc
-    if joints.shape != (N_JOINTS, 3) or not np.isfinite(joints).all():
-        raise TakeFileError(source, f"/pose_raw message {index}: joints are not finite (13, 3)")
+        document = json.loads(message.data)
+        joints = np.array(document["joints"], dtype=np.float32)
+    except KeyError:
+        raise TakeFileError(source, f"{where} has no 'joints'") from None
+    except (ValueError, TypeError) as exc:
+        raise TakeFileError(source, f"{where} is malformed: {exc}") from exc
+    if joints.shape != (N_JOINTS, 3):
+        raise TakeFileError(source, f"{where}: joints of shape {joints.shape}, not (13, 3)")
+    if not np.isfinite(joints).all():
+        raise TakeFileError(source, f"{where}: joints hold NaN or infinity")
     return joints

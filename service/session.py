@@ -101,6 +101,12 @@ class CaptureSession:
         self._viewer = viewer
         self.poses = config.input == "poses"
         self.cameras = None if self.poses else read_calibration(config.calibration)
+        if self.cameras is not None and config.min_cameras > len(self.cameras):
+            raise ServiceError(
+                str(config.calibration),
+                f"session {config.name!r} wants min_cameras {config.min_cameras}, but the "
+                f"calibration has {len(self.cameras)} camera(s)",
+            )
         self.started = time.time()
         self._pipelines = pipelines
         self.database_poses = pipelines.open(config, self.started)
@@ -109,7 +115,7 @@ class CaptureSession:
             range(count),
             config.fps,
             wait_s=config.wait_ms / 1e3,
-            min_cameras=min(config.min_cameras, count),
+            min_cameras=min(config.min_cameras, count),  # a poses session: its one node
         )
         self.latency = LatencyWindow()
         self.labels = LabelCounts()

@@ -4,6 +4,7 @@ bundles, the recorded take, the control API and `samba serve` out."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import re
 import socket
 import subprocess
@@ -201,6 +202,19 @@ def test_a_port_already_in_use_is_named(
         wanted = f"http 127.0.0.1:{port}: cannot serve the viewer and API there: Address already"
         with pytest.raises(ServiceError, match=re.escape(wanted)):
             asyncio.run(serve(("127.0.0.1", 0), ("127.0.0.1", port)))
+
+
+def test_a_session_wanting_more_cameras_than_it_has_is_refused(
+    live_store: Path, live_calibration: Path, tmp_path: Path
+) -> None:
+    cfg = dataclasses.replace(config(live_calibration, live_store), min_cameras=9)
+
+    async def serve() -> None:
+        async with LiveServer([cfg], tmp_path, udp=("127.0.0.1", 0), http=None):
+            raise AssertionError("the session opened")
+
+    with pytest.raises(ServiceError, match="wants min_cameras 9, but the calibration has 2"):
+        asyncio.run(serve())
 
 
 def test_samba_serve_command(live_store: Path, live_calibration: Path, tmp_path: Path) -> None:

@@ -399,6 +399,14 @@ def test_truncated_data_file_is_reported_on_open(store: PoseStore, path: Path, n
     assert name in str(err.value)
 
 
+@pytest.mark.parametrize("name", ["poses-0.f32", "rows-0.i32"])
+def test_a_missing_data_file_is_named(store: PoseStore, path: Path, name: str) -> None:
+    (path / name).unlink()
+    with pytest.raises(StoreError, match="missing: the store's data file is gone") as err:
+        PoseStore.open(path)
+    assert str(path / name) in str(err.value)
+
+
 def test_damaged_catalog_raises_store_error(store: PoseStore, path: Path) -> None:
     catalog = path / CATALOG
     good = catalog.read_bytes()
