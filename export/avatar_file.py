@@ -46,6 +46,11 @@ _ALIASES: dict[str, tuple[str, ...]] = {
 """Humanoid bone -> node names that mean it, in the normalised form `_plain` gives."""
 
 
+MIN_BONE_M = 1e-3
+"""Shortest bone (meters, rest pose) an avatar may have: a bone of zero length has no
+direction to turn, and retargeting onto it divides by zero."""
+
+
 def read_avatar_rig(path: str | Path) -> HumanoidRig:
     """The humanoid rig of the avatar file at `path` (.glb or .vrm), rest pose in meters
     facing +Z. Raises `ExportError` naming the file when it cannot be read or has no
@@ -69,7 +74,15 @@ def read_avatar_rig(path: str | Path) -> HumanoidRig:
     _fill_spine(rest)
     if not np.isfinite(rest).all():
         raise ExportError(file.source, "avatar skeleton has non-finite node transforms")
-    return HumanoidRig(rest=rest, tips=_tips(rest), name=Path(file.source).stem)
+    rig = HumanoidRig(rest=rest, tips=_tips(rest), name=Path(file.source).stem)
+    lengths = np.linalg.norm(rig.offsets[1:], axis=1)
+    if (lengths < MIN_BONE_M).any():
+        short = [BONE_NAMES[i + 1] for i in np.flatnonzero(lengths < MIN_BONE_M)]
+        raise ExportError(
+            file.source,
+            f"avatar bones of (nearly) zero length: {', '.join(short)} (scaled to nothing?)",
+        )
+    return rig
 
 
 def _humanoid_nodes(doc: dict[str, Any]) -> dict[str, int]:

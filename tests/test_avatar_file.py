@@ -73,6 +73,16 @@ def test_mixamo_names_in_centimetres_under_a_scaled_root(tmp_path: Path, avatar_
     np.testing.assert_allclose(rig.rest, AVATAR_RIG.rest, atol=1e-5)
 
 
+def test_an_avatar_scaled_to_nothing_is_refused(tmp_path: Path, avatar_glb: bytes) -> None:
+    def flattened(doc: dict) -> None:
+        doc["nodes"][0]["scale"] = [0.0, 0.0, 0.0]  # every bone of zero length
+
+    path = _saved(tmp_path, with_json(avatar_glb, flattened))
+    with pytest.raises(ExportError, match="bones of \\(nearly\\) zero length: Spine") as caught:
+        read_avatar_rig(path)
+    assert str(path) in str(caught.value)
+
+
 def test_vrm0_facing_minus_z_is_turned_to_face_plus_z(tmp_path: Path, avatar_glb: bytes) -> None:
     def vrm0(doc: dict) -> None:
         doc["nodes"][0]["rotation"] = [0.0, 1.0, 0.0, 0.0]  # 180 degrees about Y
