@@ -111,6 +111,13 @@ class SessionConfig:
         for key in ("calibration", "database") if kind == "markers" else ():
             if key not in values:
                 raise ServiceError(source, f"missing key {key!r}")
+        given = [key for key in ("calibration", "database") if key in values]
+        if kind == "poses" and given:
+            raise ServiceError(
+                source,
+                f"a poses session reads no {' or '.join(given)} (its markerless node sends "
+                "whole poses)",
+            )
         name = _string(values, "name", source)
         if not SESSION_NAME.fullmatch(name):
             raise ServiceError(source, f"name {name!r} is not 1..16 of [A-Za-z0-9._-]")

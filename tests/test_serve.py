@@ -272,3 +272,6 @@ def test_sessions_from_a_config_file(
     path.write_text('[[session]]\nname = "a"\ncalibration = "c"\ndatabase = "d"\nlabels = "me"\n')
     with pytest.raises(Exception, match=r"serve.toml: session 'a': labels must be one of"):
         read_sessions(path)
+    path.write_text('[[session]]\nname = "a"\ninput = "poses"\ncalibration = "c"\n')
+    with pytest.raises(ServiceError, match="a poses session reads no calibration"):
+        read_sessions(path)
