@@ -115,7 +115,7 @@ class CaptureSession:
             range(count),
             config.fps,
             wait_s=config.wait_ms / 1e3,
-            min_cameras=min(config.min_cameras, count),  # a poses session: its one node
+            min_cameras=1 if self.poses else config.min_cameras,  # poses: the one node
         )
         self.latency = LatencyWindow()
         self.labels = LabelCounts()

@@ -26,11 +26,7 @@ from samba.errors import InputError
 from samba.frame_source import open_frames
 from samba.reconstruction import PoseEstimate
 from samba.silhouette_distance import downsampled
-from samba.silhouette_extraction import (
-    BACKGROUND_METHODS,
-    MIN_BACKGROUND_FRAMES,
-    SilhouetteExtractor,
-)
+from samba.silhouette_extraction import BACKGROUND_METHODS, SilhouetteExtractor
 from samba.silhouette_tracker import SilhouetteTracker
 from samba.silhouette_view import SilhouetteView
 from samba.skeleton import N_MARKERS
@@ -65,24 +61,22 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(out), "the take is written as MCAP: give a .mcap file name")
     if out.exists():
         raise InputError(str(out), "already exists; takes are never overwritten")
-    if not args.background and args.empty_frames < MIN_BACKGROUND_FRAMES:  # before the tree
-        raise InputError(
-            "--empty-frames",
-            f"the empty stage needs at least {MIN_BACKGROUND_FRAMES} frames of {args.video}, "
-            f"got {args.empty_frames}",
-        )
     camera = chosen_camera(args.calib, args.camera)
     view = SilhouetteView(camera, chosen_home(args))
-    tree = tree_for(args.db, args.tree, view, chosen_body(args))
     frames = sized_frames(open_frames(args.video).frames(), args.video, camera, args.calib)
     if args.background:
         background = open_frames(args.background).frames()
         empty = list(sized_frames(background, args.background, camera, args.calib))
     else:
         empty = list(itertools.islice(frames, args.empty_frames))
-    extractor = SilhouetteExtractor.for_tracking(
-        [frame for _, frame in empty], view.size[0], method=args.method
-    )
+    try:  # the empty stage is checked before the shape tree is built (up to a minute)
+        extractor = SilhouetteExtractor.for_tracking(
+            [frame for _, frame in empty], view.size[0], method=args.method
+        )
+    except InputError as exc:
+        stage = args.background or f"{args.video} (--empty-frames)"
+        raise InputError(stage, exc.problem) from None
+    tree = tree_for(args.db, args.tree, view, chosen_body(args))
     try:
         seconds, held = _track(frames, extractor, SilhouetteTracker(tree), out, args)
     except BaseException:

@@ -325,7 +325,7 @@ def test_an_empty_stage_with_somebody_on_it_is_named(stage: Stage, tmp_path: Pat
 
 def test_too_few_empty_frames_are_refused_naming_the_video(stage: Stage, tmp_path: Path) -> None:
     code, _, err = track(stage, stage.with_empty, tmp_path / "wave.mcap", "--empty-frames", "3")
-    _assert_one_line_error(code, err, "--empty-frames", stage.with_empty, "at least 5 frames")
+    _assert_one_line_error(code, err, f"{stage.with_empty} (--empty-frames)", "at least 5 frames")
 
 
 def test_a_video_nobody_walks_into_is_refused(stage: Stage, tmp_path: Path) -> None:
