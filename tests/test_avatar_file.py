@@ -149,5 +149,7 @@ def test_unreadable_avatars_are_named(tmp_path: Path, content: bytes) -> None:
     with pytest.raises(ExportError) as e:
         read_avatar_rig(path)
     assert e.value.source == str(path)
+    if not content.startswith(b"glTF"):
+        assert "avatars are read from .glb or .vrm files" in e.value.problem
     with pytest.raises(ExportError, match="cannot read"):
         read_avatar_rig(tmp_path / "missing.vrm")

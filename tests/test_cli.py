@@ -135,6 +135,7 @@ def test_query_with_explicit_markers(store_with_cmu: Path, capsys) -> None:
         (["db", "query", "{store}", "--markers", "1,2,3"], "expected 8"),
         (["db", "query", "{store}", "--pose", "1:99999"], "has no frame 99999"),
         (["db", "query", "{store}", "--pose", "1:0", "--drop", "nose"], "unknown marker"),
+        (["db", "query", "{store}", "--pose", "1:0", "-k", "0"], "samba: error: -k: k must be"),
         (["db", "show", "{store}", "no-such-take"], "no take matching"),
         (["db", "import", "{store}", "{tmp}/missing.bvh", "--no-progress"], None),
         (["db", "import", "{store}", "{tmp}", "--rig", "nonsense"], "unknown rig"),
