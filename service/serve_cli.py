@@ -14,7 +14,6 @@ from threadpoolctl import threadpool_limits
 
 from samba.cli_arguments import address, bind_address, natural, positive_float
 from samba.methods import METHODS
-from service.errors import ServiceError
 from service.packet import read_key_file
 from service.serve import DEFAULT_WORKERS, HTTP_PORT, UDP_PORT, LiveServer
 from service.session import CaptureSession
@@ -95,7 +94,7 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--duration", type=positive_float, help="stop after this many seconds (default: Ctrl-C)"
     )
-    parser.set_defaults(run=run)
+    parser.set_defaults(run=run, usage_error=parser.error)  # flag conflicts exit 2
 
 
 def run(args: argparse.Namespace) -> int:
@@ -121,10 +120,10 @@ def run(args: argparse.Namespace) -> int:
 def _configs(args: argparse.Namespace) -> list[SessionConfig]:
     if args.config:
         if args.calib or args.db:
-            raise ServiceError("--config", "give either --config or --calib/--db, not both")
+            args.usage_error("give either --config or --calib/--db, not both")
         return read_sessions(args.config)
     if args.input == "markers" and not (args.calib and args.db):
-        raise ServiceError("samba serve", "give --config FILE, or --calib FILE and --db STORE")
+        args.usage_error("give --config FILE, or --calib FILE and --db STORE")
     values = {
         "name": args.session,
         "input": args.input,

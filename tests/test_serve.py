@@ -249,6 +249,10 @@ def test_samba_serve_command(live_store: Path, live_calibration: Path, tmp_path:
     )
     assert bad.returncode == 1 and "nope.toml" in bad.stderr
     assert len(bad.stderr.strip().splitlines()) == 1
+    both = [*argv[:4], "--config", str(tmp_path / "serve.toml"), "--calib", str(live_calibration)]
+    conflict = subprocess.run(both, capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert conflict.returncode == 2  # a flag conflict is a usage error
+    assert "samba serve: error: give either --config or --calib/--db" in conflict.stderr
 
 
 def test_sessions_from_a_config_file(
