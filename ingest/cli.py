@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 import numpy as np
 
@@ -207,6 +208,9 @@ def _import(args: argparse.Namespace) -> int:
         f"{added} added, {dup} already stored, {len(failed)} failed; "
         f"store now holds {len(store.takes)} takes, {len(store)} poses"
     )
+    sys.stdout.flush()  # the table first, then each failure on stderr for scripts
+    for r in failed:
+        print(f"samba: error: {r.error}", file=sys.stderr)
     return 1 if failed else 0
 
 

@@ -55,7 +55,7 @@ def test_reimport_is_a_no_op_and_bad_files_fail_alone(
     broken = tmp_path / "broken.bvh"
     broken.write_bytes((cmu_dir / "cgspeed_131_02.bvh").read_bytes()[:300_000])
     before = PoseStore.open(store_with_cmu)
-    code, out, _ = run(
+    code, out, err = run(
         capsys,
         "db",
         "import",
@@ -66,6 +66,8 @@ def test_reimport_is_a_no_op_and_bad_files_fail_alone(
         "--no-progress",
     )
     assert code == 1  # one file failed
+    (error,) = err.splitlines()  # on stderr too, for scripts that read only it
+    assert error.startswith(f"samba: error: {broken}:") and "truncated" in error
     lines = out.splitlines()
     assert any("cgspeed_131_01" in ln and "duplicate" in ln for ln in lines)
     assert any("broken.bvh" in ln and "failed" in ln and "truncated" in ln for ln in lines)
