@@ -104,11 +104,11 @@ def _humanoid_nodes(doc: dict[str, Any]) -> dict[str, int]:
             if name and name not in found:
                 found[name] = i
         return found
-    return {
-        by_vrm_name[key]: int(node)
-        for key, node in pairs
-        if key in by_vrm_name and isinstance(node, int) and 0 <= node < len(nodes)
-    }
+    wanted = [(key, node) for key, node in pairs if key in by_vrm_name]
+    for key, node in wanted:
+        if not (isinstance(node, int) and 0 <= node < len(nodes)):
+            raise ValueError(f"the VRM humanoid table puts {key} on node {node!r} of {len(nodes)}")
+    return {by_vrm_name[key]: node for key, node in wanted}
 
 
 def _plain(name: str) -> str:

@@ -116,6 +116,14 @@ def test_vrm1_table_and_optional_bones_filled_in(tmp_path: Path, avatar_glb: byt
     np.testing.assert_allclose(rig.rest[BONE_INDEX["Chest"]], hips + 0.6 * (shoulders - hips))
 
 
+def test_a_vrm_table_naming_a_missing_node_says_which(tmp_path: Path, avatar_glb: bytes) -> None:
+    def bad_hips(doc: dict) -> None:
+        doc["extensions"] = {"VRMC_vrm": {"humanoid": {"humanBones": {"hips": {"node": 9999}}}}}
+
+    with pytest.raises(ExportError, match="puts hips on node 9999 of"):
+        read_avatar_rig(_saved(tmp_path, with_json(avatar_glb, bad_hips)))
+
+
 def test_a_take_on_the_avatar_keeps_directions_and_the_avatars_proportions(
     tmp_path: Path, avatar_glb: bytes
 ) -> None:
