@@ -565,13 +565,7 @@ class PoseStore:
     def verify(self) -> VerifyReport:
         """Check the catalog, the data files and the index against each other."""
         report = VerifyReport()
-        conn = self._connect()
-        try:
-            result = conn.execute("PRAGMA integrity_check").fetchone()[0]
-        except sqlite3.DatabaseError as exc:
-            result = str(exc)
-        finally:
-            conn.close()
+        result = self._catalog_check()
         if result != "ok":
             report.problems.append(f"catalog integrity check: {result}")
         expected = 0
@@ -596,6 +590,26 @@ class PoseStore:
         if len(self) and not self.index_is_fresh():
             report.notes.append("index is stale or missing; it is rebuilt on first query")
         return report
+
+    def check_catalog(self) -> None:
+        """StoreError naming the catalog when SQLite's integrity check fails on it (a
+        few milliseconds: the catalog holds one row per take)."""
+        result = self._catalog_check()
+        if result != "ok":
+            raise StoreError(
+                str(self.path / CATALOG),
+                f"damaged ({result.splitlines()[0]}); run `samba db verify {self.path}`",
+            )
+
+    def _catalog_check(self) -> str:
+        """SQLite's integrity check of the catalog: "ok", or what it found."""
+        conn = self._connect()
+        try:
+            return str(conn.execute("PRAGMA integrity_check").fetchone()[0])
+        except sqlite3.DatabaseError as exc:
+            return str(exc)
+        finally:
+            conn.close()
 
     def verify_or_raise(self) -> None:
         """Raise `StoreCorruptedError` listing every problem `verify` finds."""

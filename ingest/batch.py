@@ -62,13 +62,14 @@ def import_paths(
     """Import every file (folders are searched for .bvh files) into `store`.
 
     Each file commits on its own, so a bad file or an interruption loses nothing already
-    imported; the index is rebuilt once at the end. A store whose pose data is damaged
-    (`PoseStore.check_poses`) raises StoreError before anything is written. `progress`
-    None shows a bar on a terminal only.
+    imported; the index is rebuilt once at the end. A store whose catalog or pose data is
+    damaged (`PoseStore.check_catalog`, `check_poses`) raises StoreError before anything
+    is written. `progress` None shows a bar on a terminal only.
     """
     results: list[FileResult] = []
     files = expand_paths(paths)
-    store.check_poses()  # nothing goes into a store whose pose data is damaged
+    store.check_catalog()  # nothing goes into a damaged store
+    store.check_poses()
     bar = tqdm(files, unit="file", disable=None if progress is None else not progress)
     for path in bar:
         bar.set_postfix_str(path.name, refresh=False)

@@ -428,6 +428,29 @@ def test_damaged_catalog_rows_are_reported_by_verify(store: PoseStore, path: Pat
     assert any("take 2 starts at row 31, expected 30" in p for p in problems)
 
 
+def test_nothing_is_imported_into_a_damaged_catalog(store: PoseStore, path: Path) -> None:
+    # The index of take names/hashes overwritten: the store opens, verify reports it, and
+    # an import refuses before writing anything.
+    with sqlite3.connect(path / CATALOG) as conn:
+        (root,) = conn.execute(
+            "SELECT rootpage FROM sqlite_master WHERE name = 'sqlite_autoindex_takes_1'"
+        ).fetchone()
+        (page_size,) = conn.execute("PRAGMA page_size").fetchone()
+    conn.close()
+    with open(path / CATALOG, "r+b") as fh:
+        fh.seek(root * page_size - 200)  # cells fill a b-tree page from its end
+        fh.write(b"\xff" * 200)
+    damaged = PoseStore.open(path)
+    assert not damaged.verify().ok
+    bvh = path.parent / "x.bvh"
+    bvh.write_text(humanoid_bvh())
+    before = snapshot_files(path)
+    with pytest.raises(StoreError, match=r"catalog\.sqlite: damaged") as err:
+        import_paths(damaged, [bvh], progress=False)
+    assert "samba db verify" in str(err.value)
+    assert snapshot_files(path) == before
+
+
 def test_random_catalog_damage_gives_only_typed_errors(store: PoseStore, path: Path) -> None:
     """Bytes of the catalog overwritten anywhere: open raises `StoreError` or verify reports;
     no raw sqlite3 or decoding error escapes."""
