@@ -1,23 +1,28 @@
-"""A user's humanoid avatar (glTF binary / VRM 0.x / VRM 1.0) as a `HumanoidRig`.
+"""A user's humanoid avatar (glTF binary or JSON / VRM 0.x / VRM 1.0 / USD) as a
+`HumanoidRig`.
 
 Bones are found by the VRM humanoid table when the file has one (`VRMC_vrm` or `VRM`
-extension), otherwise by node name: Unity / VRM humanoid names ("LeftUpperArm",
-"leftUpperArm") or Mixamo names ("mixamorig:LeftArm"), compared without case, spaces,
-underscores and a "namespace:" prefix. Hips, Head and both arms' and legs' three bones
-are required; Spine, Chest and Neck are placed on the line from the hips to the middle of
-the shoulders where the avatar lacks them. The rest pose is the file's node transforms;
-a model facing -Z (VRM 0.x) is turned to face +Z, as the retargeting expects.
+extension), otherwise by node name (glTF) or the last path component of the joint
+tokens (USD): Unity / VRM humanoid names ("LeftUpperArm", "leftUpperArm") or Mixamo
+names ("mixamorig:LeftArm"), compared without case, spaces, underscores and a
+"namespace:" prefix. Hips, Head and both arms' and legs' three bones are required;
+Spine, Chest and Neck are placed on the line from the hips to the middle of the
+shoulders where the avatar lacks them. The rest pose is the file's node transforms
+(glTF) or the UsdSkel Skeleton's rest transforms, else its bind transforms (USD: the
+first Skeleton that has every required bone), in meters with +Y up; a model facing -Z
+(VRM 0.x) is turned to face +Z, as the retargeting expects.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from export.errors import ExportError
-from export.gltf_reader import node_rest_positions, read_glb
+from export.gltf_reader import node_rest_positions, read_gltf
 from export.humanoid import BONE_INDEX, BONE_NAMES, HumanoidRig
 
 REQUIRED: tuple[str, ...] = tuple(
@@ -46,43 +51,88 @@ _ALIASES: dict[str, tuple[str, ...]] = {
 """Humanoid bone -> node names that mean it, in the normalised form `_plain` gives."""
 
 
+USD_SUFFIXES: tuple[str, ...] = (".usd", ".usda", ".usdc")
+"""Suffixes (any letter case) of the avatars read as USD: `export.usd_writer.SUFFIXES`,
+spelt out so that reading a glTF avatar does not load usd-core."""
+
 MIN_BONE_M = 1e-3
 """Shortest bone (meters, rest pose) an avatar may have: a bone of zero length has no
 direction to turn, and retargeting onto it divides by zero."""
 
 
 def read_avatar_rig(path: str | Path) -> HumanoidRig:
-    """The humanoid rig of the avatar file at `path` (.glb or .vrm), rest pose in meters
-    facing +Z. Raises `ExportError` naming the file when it cannot be read or has no
-    humanoid skeleton (listing the bones that are missing)."""
-    file = read_glb(path)
+    """The humanoid rig of the avatar file at `path`, rest pose (17, 3) in meters, +Y up,
+    facing +Z. USD (.usd, .usda, .usdc) by its suffix, any other file as glTF: binary
+    (.glb, .vrm) or JSON (.gltf), told apart by content. Raises `ExportError` naming the
+    file when it cannot be read or has no humanoid skeleton (listing the bones that are
+    missing)."""
+    is_usd = Path(path).suffix.lower() in USD_SUFFIXES
+    return _rig(str(path), _usd_bones(path) if is_usd else _gltf_bones(path))
+
+
+def _gltf_bones(path: str | Path) -> dict[str, np.ndarray]:
+    """Humanoid bone name -> rest position (3,) in meters of a glTF / VRM avatar's bones."""
+    file = read_gltf(path)
     try:
         nodes = _humanoid_nodes(file.doc)
         world = node_rest_positions(file)
     except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
         raise ExportError(file.source, f"malformed glTF: {type(exc).__name__}: {exc}") from exc
-    missing = [name for name in REQUIRED if name not in nodes]
+    return {name: world[node] for name, node in nodes.items()}
+
+
+def _usd_bones(path: str | Path) -> dict[str, np.ndarray]:
+    """Humanoid bone name -> rest position (3,) in meters, +Y up, of the first humanoid
+    UsdSkel Skeleton of a USD avatar, its joints found by name."""
+    from export.usd_reader import read_usd_skeleton_rests  # pxr loads only for USD avatars
+
+    found = []
+    for skeleton in read_usd_skeleton_rests(path):
+        bones = {name: skeleton.positions[i] for name, i in _named_bones(skeleton.names).items()}
+        if not _missing(bones):
+            return bones
+        found.append((skeleton.path, bones))
+    if len(found) == 1:
+        return found[0][1]  # `_rig` names the missing bones
+    raise ExportError(
+        str(path),
+        f"avatar has no humanoid skeleton: none of its {len(found)} skeletons has every bone ("
+        + "; ".join(f"{where}: no {', '.join(_missing(bones))}" for where, bones in found)
+        + ")",
+    )
+
+
+def _rig(source: str, bones: dict[str, np.ndarray]) -> HumanoidRig:
+    """The rig of an avatar's humanoid bones (name -> rest position (3,) in meters, +Y up):
+    turned to face +Z, Spine, Chest and Neck filled in where absent, checked for missing,
+    non-finite and zero-length bones (`ExportError` naming `source`)."""
+    missing = _missing(bones)
     if missing:
         raise ExportError(
-            file.source, f"avatar has no humanoid skeleton: no bone for {', '.join(missing)}"
+            source, f"avatar has no humanoid skeleton: no bone for {', '.join(missing)}"
         )
     rest = np.full((len(BONE_NAMES), 3), np.nan)
-    for name, node in nodes.items():
-        rest[BONE_INDEX[name]] = world[node]
+    for name, position in bones.items():
+        rest[BONE_INDEX[name]] = position
     if rest[BONE_INDEX["LeftUpperArm"], 0] < rest[BONE_INDEX["RightUpperArm"], 0]:
         rest *= [-1.0, 1.0, -1.0]
     _fill_spine(rest)
     if not np.isfinite(rest).all():
-        raise ExportError(file.source, "avatar skeleton has non-finite node transforms")
-    rig = HumanoidRig(rest=rest, tips=_tips(rest), name=Path(file.source).stem)
+        raise ExportError(source, "avatar skeleton has non-finite node transforms")
+    rig = HumanoidRig(rest=rest, tips=_tips(rest), name=Path(source).stem)
     lengths = np.linalg.norm(rig.offsets[1:], axis=1)
     if (lengths < MIN_BONE_M).any():
         short = [BONE_NAMES[i + 1] for i in np.flatnonzero(lengths < MIN_BONE_M)]
         raise ExportError(
-            file.source,
+            source,
             f"avatar bones of (nearly) zero length: {', '.join(short)} (scaled to nothing?)",
         )
     return rig
+
+
+def _missing(bones: dict[str, np.ndarray]) -> list[str]:
+    """The required bones (`REQUIRED` order) that `bones` lacks."""
+    return [name for name in REQUIRED if name not in bones]
 
 
 def _humanoid_nodes(doc: dict[str, Any]) -> dict[str, int]:
@@ -97,18 +147,24 @@ def _humanoid_nodes(doc: dict[str, Any]) -> dict[str, int]:
         bones = extensions["VRM"].get("humanoid", {}).get("humanBones", [])
         pairs = [(b.get("bone", ""), b.get("node")) for b in bones]
     else:
-        wanted = {alias: name for name, aliases in _ALIASES.items() for alias in aliases}
-        found: dict[str, int] = {}
-        for i, node in enumerate(nodes):
-            name = wanted.get(_plain(node.get("name", "")))
-            if name and name not in found:
-                found[name] = i
-        return found
+        return _named_bones([node.get("name", "") for node in nodes])
     wanted = [(key, node) for key, node in pairs if key in by_vrm_name]
     for key, node in wanted:
         if not (isinstance(node, int) and 0 <= node < len(nodes)):
             raise ValueError(f"the VRM humanoid table puts {key} on node {node!r} of {len(nodes)}")
     return {by_vrm_name[key]: node for key, node in wanted}
+
+
+def _named_bones(names: Sequence[str]) -> dict[str, int]:
+    """Humanoid bone name -> index of the first of `names` (node or joint names) that
+    means it, by `_ALIASES`."""
+    wanted = {alias: name for name, aliases in _ALIASES.items() for alias in aliases}
+    found: dict[str, int] = {}
+    for i, node_name in enumerate(names):
+        name = wanted.get(_plain(node_name))
+        if name and name not in found:
+            found[name] = i
+    return found
 
 
 def _plain(name: str) -> str:

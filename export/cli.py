@@ -59,7 +59,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--avatar",
         metavar="FILE",
-        help="a glTF / VRM humanoid avatar whose skeleton the takes are put on",
+        help="a humanoid avatar whose skeleton the takes are put on: glTF (.glb, .gltf), "
+        "VRM (.vrm) or USD (.usd, .usda, .usdc)",
     )
     parser.add_argument(
         "--fps",

@@ -1,19 +1,23 @@
-"""Reading joint motion back from a glTF 2.0 binary (.glb) file.
+"""Reading glTF 2.0 files: GLB containers (.glb, .vrm) and JSON glTF (.gltf).
 
-The verification reader of `export.gltf_writer`, written for any reasonable .glb: it
-parses the GLB container itself, reads accessors of any component type (normalised
-integers included, interleaved views too) and samples STEP, LINEAR and CUBICSPLINE
-animation channels. The joints are the nodes of the file's skins (first skin's order,
-then any others); a file without skins takes every node the first animation moves,
-directly or through an ancestor. World transforms follow the spec (FORMATS.md §2.9): at
-each key time the animated TRS replaces the node's own, and world = parentWorld·T·R·S.
+The verification reader of `export.gltf_writer`, written for any reasonable glTF: it
+parses the GLB container itself, loads JSON glTF's buffers from the files beside it or
+from base64 `data:` URIs, reads accessors of any component type (normalised integers
+included, interleaved views too) and samples STEP, LINEAR and CUBICSPLINE animation
+channels. The joints are the nodes of the file's skins (first skin's order, then any
+others); a file without skins takes every node the first animation moves, directly or
+through an ancestor. World transforms follow the spec (FORMATS.md §2.9): at each key
+time the animated TRS replaces the node's own, and world = parentWorld·T·R·S.
 """
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import os
 import struct
+import urllib.parse
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +29,8 @@ from export.errors import ExportError
 _MAGIC = b"glTF"
 _JSON_CHUNK = 0x4E4F534A
 _BIN_CHUNK = 0x004E4942
+_UTF8_BOM = b"\xef\xbb\xbf"
+_AVATAR_FORMATS = "avatars are read from .glb, .vrm, .gltf, .usd, .usda or .usdc files"
 _COMPONENTS: dict[int, type[np.generic]] = {
     5120: np.int8,
     5121: np.uint8,
@@ -56,24 +62,44 @@ def read_glb_joint_positions(path: str | os.PathLike[str]) -> tuple[tuple[str, .
         raise ExportError(file.source, f"malformed glTF: {type(exc).__name__}: {exc}") from exc
 
 
-def read_glb(path: str | os.PathLike[str]) -> GlbDocument:
-    """The parsed .glb (or .vrm, the same container) at `path`; `ExportError` naming the
-    file when it cannot be read or is not a GLB container."""
+def read_glb(path: str | os.PathLike[str]) -> GltfDocument:
+    """The parsed .glb (or .vrm, the same container) at `path`, its buffers loaded (the
+    binary chunk, and any buffer given by a URI: see `read_gltf`); `ExportError` naming
+    the file when it cannot be read or is not a GLB container."""
     source = str(path)
+    doc, chunk = _parse_glb(_read_bytes(path, source), source)
+    return GltfDocument(doc, _load_buffers(doc, chunk, Path(path).parent, source), source)
+
+
+def read_gltf(path: str | os.PathLike[str]) -> GltfDocument:
+    """The glTF file at `path` in either form, told apart by its content: a GLB container
+    (.glb, .vrm) or JSON glTF (.gltf) whose buffers are files beside it (relative,
+    percent-encoded URIs) or base64 `data:` URIs. Every buffer is loaded and must hold at
+    least its `byteLength` bytes. Raises `ExportError` naming the file when it, or one of
+    its buffers, cannot be read or is malformed."""
+    source = str(path)
+    data = _read_bytes(path, source)
+    if data[:4] == _MAGIC:
+        doc, chunk = _parse_glb(data, source)
+    elif data.removeprefix(_UTF8_BOM).lstrip()[:1] == b"{":
+        doc, chunk = _parse_json(data.removeprefix(_UTF8_BOM), source, "the file"), None
+    else:
+        raise ExportError(source, f"not a glTF file (.glb, .vrm or .gltf): {_AVATAR_FORMATS}")
+    return GltfDocument(doc, _load_buffers(doc, chunk, Path(path).parent, source), source)
+
+
+def _read_bytes(path: str | os.PathLike[str], source: str) -> bytes:
+    """The content of the file at `path`; `ExportError` naming `source` when unreadable."""
     try:
-        data = Path(path).read_bytes()
+        return Path(path).read_bytes()
     except OSError as exc:
         raise ExportError(source, f"cannot read the file: {exc.strerror or exc}") from exc
-    doc, binary = _parse_glb(data, source)
-    return GlbDocument(doc, binary, source)
 
 
-def _parse_glb(data: bytes, source: str) -> tuple[dict[str, Any], bytes]:
-    """The JSON document and the binary chunk (b"" if none) of a GLB container."""
+def _parse_glb(data: bytes, source: str) -> tuple[dict[str, Any], bytes | None]:
+    """The JSON document and the binary chunk (None if none) of a GLB container."""
     if len(data) < 20 or data[:4] != _MAGIC:
-        raise ExportError(
-            source, "not a binary glTF (.glb) file: avatars are read from .glb or .vrm files"
-        )
+        raise ExportError(source, f"not a binary glTF (.glb) container: {_AVATAR_FORMATS}")
     version, length = struct.unpack_from("<II", data, 4)
     if version != 2:
         raise ExportError(source, f"glTF container version {version} is not supported (need 2)")
@@ -91,22 +117,92 @@ def _parse_glb(data: bytes, source: str) -> tuple[dict[str, Any], bytes]:
         offset += 8 + size
     if not chunks or chunks[0][0] != _JSON_CHUNK:
         raise ExportError(source, "the first chunk is not the JSON chunk")
-    try:
-        doc = json.loads(chunks[0][1].decode("utf-8"))
-    except ValueError as exc:
-        raise ExportError(source, f"the JSON chunk is not valid JSON: {exc}") from exc
-    if not isinstance(doc, dict):
-        raise ExportError(source, "the JSON chunk is not a glTF object")
-    binary = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == _BIN_CHUNK else b""
+    doc = _parse_json(chunks[0][1], source, "the JSON chunk")
+    binary = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == _BIN_CHUNK else None
     return doc, binary
 
 
-class GlbDocument:
-    """A parsed .glb: the JSON document, its binary chunk and where it came from."""
+def _parse_json(text: bytes, source: str, what: str) -> dict[str, Any]:
+    """The glTF object of JSON `text` (`what` names it in errors: the file or the chunk)."""
+    try:
+        doc = json.loads(text.decode("utf-8"))
+    except ValueError as exc:
+        raise ExportError(source, f"{what} is not valid JSON: {exc}") from exc
+    if not isinstance(doc, dict):
+        raise ExportError(source, f"{what} is not a glTF object")
+    return doc
 
-    def __init__(self, doc: dict[str, Any], binary: bytes, source: str) -> None:
+
+def _load_buffers(
+    doc: dict[str, Any], chunk: bytes | None, folder: Path, source: str
+) -> list[bytes]:
+    """The bytes of every buffer of `doc`, in order: the GLB binary `chunk` for a first
+    buffer without a URI, a base64 `data:` URI decoded, or a file in `folder` (the glTF
+    file's own) for a relative URI. `ExportError` naming `source` and the buffer when one
+    cannot be had or is shorter than its `byteLength`."""
+    buffers = doc.get("buffers", [])
+    if not isinstance(buffers, list):
+        raise ExportError(source, "malformed glTF: 'buffers' is not a list")
+    loaded = []
+    for i, buffer in enumerate(buffers):
+        if not isinstance(buffer, dict) or not isinstance(buffer.get("byteLength"), int):
+            raise ExportError(source, f"buffer {i} has no whole-number byteLength")
+        uri = buffer.get("uri")
+        if uri is None and i == 0 and chunk is not None:
+            data, where = chunk, "the binary chunk"
+        elif uri is None:
+            raise ExportError(source, f"buffer {i} has no uri and there is no binary chunk")
+        elif not isinstance(uri, str):
+            raise ExportError(source, f"buffer {i} has a uri that is not a string: {uri!r}")
+        elif uri.startswith("data:"):
+            data, where = _data_uri_bytes(uri, i, source), "its data URI"
+        else:
+            data, where = _buffer_file_bytes(folder, uri, i, source), repr(uri)
+        if len(data) < buffer["byteLength"]:
+            raise ExportError(
+                source,
+                f"buffer {i} is too short: {where} holds {len(data)} bytes, "
+                f"its byteLength says {buffer['byteLength']}",
+            )
+        loaded.append(data)
+    return loaded
+
+
+def _data_uri_bytes(uri: str, index: int, source: str) -> bytes:
+    """The bytes of buffer `index`'s base64 `data:` URI."""
+    header, comma, payload = uri.partition(",")
+    if not comma or not header.endswith(";base64"):
+        raise ExportError(source, f"buffer {index}: only base64 data URIs are supported")
+    try:
+        return base64.b64decode(payload, validate=True)
+    except (binascii.Error, ValueError) as exc:
+        raise ExportError(source, f"buffer {index}: bad base64 in its data URI: {exc}") from exc
+
+
+def _buffer_file_bytes(folder: Path, uri: str, index: int, source: str) -> bytes:
+    """The content of buffer `index`'s file, named by the relative `uri` from `folder`."""
+    parts = urllib.parse.urlsplit(uri)
+    if parts.scheme or parts.netloc or uri.startswith("/"):
+        raise ExportError(
+            source,
+            f"buffer {index}: only relative file names and data: URIs are supported, not {uri!r}",
+        )
+    path = folder / urllib.parse.unquote(parts.path)
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise ExportError(
+            source, f"buffer {index}: cannot read its file {path}: {exc.strerror or exc}"
+        ) from exc
+
+
+class GltfDocument:
+    """A parsed glTF file: the JSON document, the bytes of its buffers (in `buffers`
+    order) and where it came from."""
+
+    def __init__(self, doc: dict[str, Any], buffers: list[bytes], source: str) -> None:
         self.doc = doc
-        self.binary = binary
+        self.buffers = buffers
         self.source = source
 
     def accessor(self, index: int) -> np.ndarray:
@@ -120,19 +216,18 @@ class GlbDocument:
         if "bufferView" not in acc:
             return np.zeros((count, width))
         view = self.doc["bufferViews"][acc["bufferView"]]
-        if self.doc["buffers"][view["buffer"]].get("uri") is not None:
-            raise ExportError(self.source, f"accessor {index}: external buffers are not supported")
+        buffer = self.buffers[view["buffer"]]
         element = dtype.itemsize * width
         stride = view.get("byteStride") or element
         start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
         end = start + stride * (count - 1) + element
         if count < 1 or end > view.get("byteOffset", 0) + view["byteLength"]:
             raise ExportError(self.source, f"accessor {index} does not fit its buffer view")
-        if end > len(self.binary):
-            raise ExportError(self.source, f"accessor {index} runs past the binary chunk")
-        values = np.ndarray(
-            (count, width), dtype, self.binary, start, (stride, dtype.itemsize)
-        ).astype(np.float64)
+        if end > len(buffer):
+            raise ExportError(self.source, f"accessor {index} runs past buffer {view['buffer']}")
+        values = np.ndarray((count, width), dtype, buffer, start, (stride, dtype.itemsize)).astype(
+            np.float64
+        )
         if acc.get("normalized"):
             values = np.maximum(values / np.iinfo(dtype).max, -1.0)
         return values
@@ -172,7 +267,7 @@ class GlbDocument:
         return out
 
 
-def node_rest_positions(file: GlbDocument) -> np.ndarray:
+def node_rest_positions(file: GltfDocument) -> np.ndarray:
     """World positions (n_nodes, 3) of every node with its own transform (no animation),
     in file units (meters for glTF)."""
     nodes = file.doc.get("nodes", [])
@@ -185,7 +280,7 @@ def node_rest_positions(file: GlbDocument) -> np.ndarray:
     return np.array([world[i][:3, 3] for i in range(len(nodes))]).reshape(-1, 3)
 
 
-def _joint_positions(file: GlbDocument) -> tuple[tuple[str, ...], np.ndarray]:
+def _joint_positions(file: GltfDocument) -> tuple[tuple[str, ...], np.ndarray]:
     """Joint names and world positions (n_keys, n_joints, 3) of a parsed file."""
     doc = file.doc
     nodes = doc.get("nodes", [])
@@ -222,7 +317,7 @@ def _joint_positions(file: GlbDocument) -> tuple[tuple[str, ...], np.ndarray]:
 
 
 def _local_matrices(
-    file: GlbDocument,
+    file: GltfDocument,
     node: dict[str, Any],
     index: int,
     tracks: dict[tuple[int, str], dict[str, Any]],

@@ -1,15 +1,22 @@
-"""Reading USD exports back: joint world positions posed by UsdSkel itself, and the
-UsdValidation report. Used to verify what `export.usd_writer` writes (FORMATS.md §1.6, §1.7)."""
+"""Reading USD files: joint world positions posed by UsdSkel itself and the UsdValidation
+report, to verify what `export.usd_writer` writes (FORMATS.md §1.6, §1.7), and the rest
+pose of every UsdSkel Skeleton, in our frame, for avatars (`export.avatar_file`)."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from pxr import Tf, Usd, UsdGeom, UsdSkel, UsdValidation
 
 from export.errors import ExportError
 from export.usd_writer import tf_error_text
+
+_Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+"""Rotation (-90 degrees about X) taking a Z-up stage's points to +Y up: (x, y, z) ->
+(x, z, -y)."""
 
 
 def read_usd_joint_positions(
@@ -23,12 +30,8 @@ def read_usd_joint_positions(
     pose for a skeleton without animation), posed by UsdSkel. Raises `ExportError` naming
     the file when it cannot be read or holds no valid skeleton under a SkelRoot.
     """
-    stage = _open(path)
-    skeleton = next(
-        (UsdSkel.Skeleton(prim) for prim in stage.Traverse() if prim.IsA(UsdSkel.Skeleton)), None
-    )
-    if skeleton is None:
-        raise ExportError(str(path), "no UsdSkel Skeleton in the file")
+    stage = _open(path)  # the prims live as long as their stage: keep it
+    skeleton = _skeletons(stage, path)[0]
     root = UsdSkel.Root.Find(skeleton.GetPrim())
     if not root:
         raise ExportError(str(path), f"skeleton {skeleton.GetPath()} is not under a SkelRoot")
@@ -47,8 +50,77 @@ def read_usd_joint_positions(
         if len(world) != positions.shape[1]:
             raise ExportError(str(path), f"UsdSkel cannot pose {skeleton.GetPath()} at {time}")
         positions[frame] = np.asarray(world)[:, 3, :3]
-    names = tuple(str(token).rsplit("/", 1)[-1] for token in query.GetJointOrder())
-    return names, positions
+    return _leaf_names(query.GetJointOrder()), positions
+
+
+@dataclass(frozen=True)
+class SkeletonRest:
+    """A UsdSkel Skeleton's rest pose: its prim `path`, the leaf `names` of its joint
+    tokens (the last path component, in joint order) and the joints' world `positions`
+    (n_joints, 3) in meters, right-handed, +Y up."""
+
+    path: str
+    names: tuple[str, ...]
+    positions: np.ndarray
+
+
+def read_usd_skeleton_rests(path: str | os.PathLike[str]) -> list[SkeletonRest]:
+    """The rest pose of every UsdSkel Skeleton in a USD file, in stage traversal order.
+
+    A joint's world rest transform is its `restTransforms` (local) concatenated down the
+    joint hierarchy and placed by the Skeleton prim's own world transform (at the earliest
+    time), or, without `restTransforms`, its `bindTransforms` (world space by UsdSkel's
+    definition). Positions are converted from the stage's `metersPerUnit` to meters and
+    from a Z-up stage to +Y up (x, y, z -> x, z, -y: a model facing -Y faces +Z). Raises
+    `ExportError` naming the file when it cannot be read, has no Skeleton, or a Skeleton's
+    joints are mis-ordered or have neither transform array for every joint.
+    """
+    stage = _open(path)
+    scale = UsdGeom.GetStageMetersPerUnit(stage)
+    to_y_up = _Z_UP_TO_Y_UP if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else np.eye(3)
+    rests = []
+    for skeleton in _skeletons(stage, path):
+        tokens = skeleton.GetJointsAttr().Get() or []
+        world = _world_rest_transforms(skeleton, tokens, str(path))
+        rests.append(
+            SkeletonRest(
+                path=str(skeleton.GetPath()),
+                names=_leaf_names(tokens),
+                positions=scale * world[:, 3, :3] @ to_y_up.T,
+            )
+        )
+    return rests
+
+
+def _leaf_names(tokens: Sequence[str]) -> tuple[str, ...]:
+    """The last path component of each joint token ("Hips/Spine" -> "Spine")."""
+    return tuple(str(token).rsplit("/", 1)[-1] for token in tokens)
+
+
+def _world_rest_transforms(
+    skeleton: UsdSkel.Skeleton, tokens: Sequence[str], source: str
+) -> np.ndarray:
+    """World rest matrices (n_joints, 4, 4) of a Skeleton, USD row-vector layout (the
+    translation in row 3), in stage units."""
+    where = f"skeleton {skeleton.GetPath()}"
+    if not tokens:
+        raise ExportError(source, f"{where} has no joints")
+    topology = UsdSkel.Topology(tokens)
+    valid, why = topology.Validate()
+    if not valid:
+        raise ExportError(source, f"{where}: {why}")
+    rest = skeleton.GetRestTransformsAttr().Get()
+    if rest is not None and len(rest) == len(tokens):
+        placed = UsdGeom.Xformable(skeleton).ComputeLocalToWorldTransform(
+            Usd.TimeCode.EarliestTime()
+        )
+        return np.asarray(UsdSkel.ConcatJointTransforms(topology, rest)) @ np.asarray(placed)
+    bind = skeleton.GetBindTransformsAttr().Get()
+    if bind is not None and len(bind) == len(tokens):
+        return np.asarray(bind)
+    raise ExportError(
+        source, f"{where} has no restTransforms or bindTransforms for its {len(tokens)} joints"
+    )
 
 
 def usd_validation_errors(path: str | os.PathLike[str]) -> list[str]:
@@ -63,6 +135,15 @@ def usd_validation_errors(path: str | os.PathLike[str]) -> list[str]:
         for issue in context.Validate(stage)
         if not issue.HasNoError()
     ]
+
+
+def _skeletons(stage: Usd.Stage, path: str | os.PathLike[str]) -> list[UsdSkel.Skeleton]:
+    """Every Skeleton prim of `stage` in traversal order; `ExportError` naming `path` when
+    there is none."""
+    skeletons = [UsdSkel.Skeleton(prim) for prim in stage.Traverse() if prim.IsA(UsdSkel.Skeleton)]
+    if not skeletons:
+        raise ExportError(str(path), "no UsdSkel Skeleton prim in the file")
+    return skeletons
 
 
 def _open(path: str | os.PathLike[str]) -> Usd.Stage:

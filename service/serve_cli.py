@@ -48,7 +48,10 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="HOST:PORT",
         help="send VMC to this receiver (repeatable), e.g. 127.0.0.1:39539",
     )
-    one.add_argument("--avatar", help="avatar file (.vrm, .glb) whose rig the VMC stream uses")
+    one.add_argument(
+        "--avatar",
+        help="avatar file (.vrm, .glb, .gltf, .usd, .usda, .usdc) whose rig the VMC stream uses",
+    )
     one.add_argument("--wait-ms", type=float, default=50.0, help="wait for late cameras (ms)")
     one.add_argument(
         "--labels",

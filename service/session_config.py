@@ -12,7 +12,7 @@ A session comes from `samba serve` flags, from a `[[session]]` table of a TOML f
 | `method` | string | `"samba"` | reconstruction method (`samba eval --methods` names) |
 | `fps` | number | 60 | nominal frame rate of the cameras |
 | `vmc` | list of `"HOST:PORT"` | `[]` | VMC/OSC receivers (VSeeFace, EVMC4U, VMC4UE ...) |
-| `avatar` | path | none | avatar file (.vrm/.glb) whose rig the VMC stream uses |
+| `avatar` | path | none | avatar (.vrm, .glb, .gltf, .usd/a/c) whose rig the VMC stream uses |
 | `wait_ms` | number | 50 | how long a frame waits for late cameras |
 | `min_cameras` | integer | 2 | fewest cameras a frame is reconstructed from |
 | `gate_px` | number | 10 | triangulation outlier gate, pixels (0 = none) |

@@ -1,19 +1,25 @@
-"""Users' avatars (glTF / VRM) read as humanoid rigs, and takes retargeted onto them."""
+"""Users' avatars (glTF binary and JSON / VRM / USD) read as humanoid rigs, and takes
+retargeted onto them."""
 
 from __future__ import annotations
 
+import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
-from glb_edit import with_json
+from glb_edit import with_json, write_gltf
+from pxr import Usd, UsdGeom, UsdSkel, Vt
 
-from export.avatar_file import read_avatar_rig
+from export import usd_writer
+from export.avatar_file import USD_SUFFIXES, read_avatar_rig
 from export.errors import ExportError
 from export.gltf_writer import write_glb
 from export.humanoid import BONE_INDEX, BONE_NAMES, N_BONES, HumanoidRig
 from export.motion import HumanoidMotion
 from export.retarget import bone_direction_errors, retarget
+from export.usd_writer import joint_tokens, write_usd
 from samba.skeleton import Body
 from samba.synthetic import generate
 
@@ -39,14 +45,17 @@ MIXAMO = {
 }
 
 
+AVATAR_STILL = HumanoidMotion(
+    AVATAR_RIG, np.tile([0.0, 0.0, 0.0, 1.0], (1, N_BONES, 1)), AVATAR_RIG.rest[None, 0], 30
+)
+"""`AVATAR_RIG` standing in its rest pose for one frame."""
+
+
 @pytest.fixture
 def avatar_glb(tmp_path: Path) -> bytes:
     """A skeleton-only .glb of `AVATAR_RIG` in its rest pose (node 0 is the Armature)."""
-    still = HumanoidMotion(
-        AVATAR_RIG, np.tile([0.0, 0.0, 0.0, 1.0], (1, N_BONES, 1)), AVATAR_RIG.rest[None, 0], 30
-    )
     path = tmp_path / "source.glb"
-    write_glb(path, still)
+    write_glb(path, AVATAR_STILL)
     return path.read_bytes()
 
 
@@ -158,6 +167,177 @@ def test_unreadable_avatars_are_named(tmp_path: Path, content: bytes) -> None:
         read_avatar_rig(path)
     assert e.value.source == str(path)
     if not content.startswith(b"glTF"):
-        assert "avatars are read from .glb or .vrm files" in e.value.problem
+        assert "avatars are read from .glb, .vrm, .gltf, .usd, .usda or .usdc files" in str(e.value)
     with pytest.raises(ExportError, match="cannot read"):
         read_avatar_rig(tmp_path / "missing.vrm")
+
+
+@pytest.mark.parametrize("bin_name", ["avatar.bin", "my avatar.bin", None])
+def test_json_gltf_with_a_bin_file_or_a_data_uri_gives_the_glbs_rig(
+    tmp_path: Path, avatar_glb: bytes, bin_name: str | None
+) -> None:
+    glb_rig = read_avatar_rig(_saved(tmp_path, avatar_glb))
+    path = tmp_path / "avatar.gltf"
+    write_gltf(avatar_glb, path, bin_name)
+    if bin_name == "my avatar.bin":  # glTF URIs are percent-encoded
+        path.write_text(path.read_text().replace('"my avatar.bin"', '"my%20avatar.bin"'))
+    rig = read_avatar_rig(path)
+    assert np.allclose(rig.rest, glb_rig.rest) and np.allclose(rig.tips, glb_rig.tips)
+    np.testing.assert_allclose(rig.rest, AVATAR_RIG.rest, atol=1e-6)
+
+
+def test_json_gltf_problems_name_the_file_and_the_buffer(tmp_path: Path, avatar_glb: bytes) -> None:
+    gltf = tmp_path / "avatar.gltf"
+    write_gltf(avatar_glb, gltf, "avatar.bin")
+    doc = json.loads(gltf.read_text())
+    length = doc["buffers"][0]["byteLength"]
+
+    def variant(name: str, edit: Callable[[dict], None]) -> Path:
+        changed = json.loads(gltf.read_text())
+        edit(changed)
+        path = tmp_path / name
+        path.write_text(json.dumps(changed))
+        return path
+
+    (tmp_path / "short.bin").write_bytes((tmp_path / "avatar.bin").read_bytes()[: length // 2])
+    (tmp_path / "broken.gltf").write_text(gltf.read_text()[:-40])
+    problems = {
+        variant("no_bin.gltf", lambda d: d["buffers"][0].update(uri="gone.bin")): (
+            f"buffer 0: cannot read its file {tmp_path / 'gone.bin'}: No such file"
+        ),
+        variant("short.gltf", lambda d: d["buffers"][0].update(uri="short.bin")): (
+            f"buffer 0 is too short: 'short.bin' holds {length // 2} bytes, "
+            f"its byteLength says {length}"
+        ),
+        variant(
+            "base64.gltf",
+            lambda d: d["buffers"][0].update(uri="data:application/octet-stream;base64,AB*C"),
+        ): "buffer 0: bad base64 in its data URI",
+        variant("web.gltf", lambda d: d["buffers"][0].update(uri="https://example.com/a.bin")): (
+            "only relative file names and data: URIs are supported"
+        ),
+        variant("no_uri.gltf", lambda d: d["buffers"][0].pop("uri")): (
+            "buffer 0 has no uri and there is no binary chunk"
+        ),
+        tmp_path / "broken.gltf": "the file is not valid JSON",
+    }
+    for path, problem in problems.items():
+        with pytest.raises(ExportError) as raised:
+            read_avatar_rig(path)
+        assert raised.value.source == str(path)
+        assert problem in raised.value.problem
+
+
+def test_a_usd_avatar_from_our_writer_gives_back_its_rig(tmp_path: Path) -> None:
+    path = tmp_path / "avatar.usda"
+    write_usd(path, AVATAR_STILL)
+    rig = read_avatar_rig(path)
+    np.testing.assert_allclose(rig.rest, AVATAR_RIG.rest, atol=1e-6)
+    assert rig.name == "avatar"
+    binary = tmp_path / "avatar.USDC"
+    write_usd(tmp_path / "avatar.usdc", AVATAR_STILL)
+    (tmp_path / "avatar.usdc").rename(binary)
+    np.testing.assert_allclose(read_avatar_rig(binary).rest, rig.rest)
+
+
+@pytest.mark.parametrize("transforms", ["rest", "bind"])
+def test_a_z_up_centimetre_usd_stage_gives_the_rig_in_meters_y_up(
+    tmp_path: Path, transforms: str
+) -> None:
+    """Blender's USD export: Z up, centimetres, the character facing -Y under a root joint
+    (turned 180 degrees about the up axis here, so it faces +Y and is turned back)."""
+    path = tmp_path / "blender.usda"
+    _usd_avatar(path, [_turned_skeleton(AVATAR_RIG)], transforms, meters_per_unit=0.01, up="Z")
+    rig = read_avatar_rig(path)
+    np.testing.assert_allclose(rig.rest, AVATAR_RIG.rest, atol=1e-6)
+
+
+def test_of_several_usd_skeletons_the_humanoid_one_is_taken(tmp_path: Path) -> None:
+    prop = (["Sword", "Sword/Blade"], np.array([[0.0, 1.0, 0.0], [0.0, 1.5, 0.0]]))
+    tokens, positions = _turned_skeleton(AVATAR_RIG)
+    path = tmp_path / "avatar.usda"
+    _usd_avatar(path, [prop, (tokens, positions / 100.0)], "rest", meters_per_unit=1.0, up="Z")
+    np.testing.assert_allclose(read_avatar_rig(path).rest, AVATAR_RIG.rest, atol=1e-6)
+
+
+def test_usd_avatars_without_a_humanoid_skeleton_are_named(tmp_path: Path) -> None:
+    plain = Usd.Stage.CreateNew(str(tmp_path / "plain.usda"))
+    UsdGeom.Xform.Define(plain, "/World")
+    plain.Save()
+    tokens, positions = _turned_skeleton(AVATAR_RIG)
+    no_arms = [t.replace("LeftUpperArm", "LeftShoulderPad") for t in tokens]
+    _usd_avatar(tmp_path / "armless.usda", [(no_arms, positions)], "rest")
+    prop = (["Sword", "Sword/Blade"], np.array([[0.0, 1.0, 0.0], [0.0, 1.5, 0.0]]))
+    _usd_avatar(tmp_path / "two.usda", [prop, (no_arms, positions)], "bind")
+    _usd_avatar(tmp_path / "nothing.usda", [(tokens, positions)], "none")
+    (tmp_path / "text.usda").write_text("Hips 0 0 0\n")
+    problems = {
+        "plain.usda": ["no UsdSkel Skeleton prim in the file"],
+        "armless.usda": ["avatar has no humanoid skeleton: no bone for LeftUpperArm"],
+        "two.usda": [
+            "avatar has no humanoid skeleton: none of its 2 skeletons has every bone "
+            "(/Character/Skel0: no Hips, Head, LeftUpperArm, ",
+            "; /Character/Skel1: no LeftUpperArm)",
+        ],
+        "nothing.usda": [
+            "skeleton /Character/Skel0 has no restTransforms or bindTransforms for its 18 joints"
+        ],
+        "text.usda": ["cannot read the file as USD"],
+        "missing.usd": ["cannot read the file: no such file"],
+    }
+    for name, parts in problems.items():
+        path = tmp_path / name
+        with pytest.raises(ExportError) as raised:
+            read_avatar_rig(path)
+        assert raised.value.source == str(path)
+        assert all(part in raised.value.problem for part in parts), raised.value.problem
+
+
+def test_usd_suffixes_are_the_usd_writers() -> None:
+    assert sorted(USD_SUFFIXES) == sorted(usd_writer.SUFFIXES)
+
+
+def _turned_skeleton(rig: HumanoidRig) -> tuple[list[str], np.ndarray]:
+    """The rig's joints under a "Root" joint as a Z-up, centimetre stage would hold them:
+    joint tokens and world positions (n, 3), turned 180 degrees about the up axis (the
+    rig then faces +Y; the root joint at the origin)."""
+    tokens = ["Root", *(f"Root/{token}" for token in joint_tokens(rig))]
+    y_up = np.vstack([np.zeros(3), rig.rest])
+    z_up = 100.0 * np.stack([y_up[:, 0], -y_up[:, 2], y_up[:, 1]], axis=1)
+    return tokens, z_up * [-1.0, -1.0, 1.0]
+
+
+def _usd_avatar(
+    path: Path,
+    skeletons: list[tuple[list[str], np.ndarray]],
+    transforms: str,
+    meters_per_unit: float = 1.0,
+    up: str = "Y",
+) -> None:
+    """A USD file with one Skeleton per (joint tokens, world positions (n, 3)) under the
+    SkelRoot /Character, as `transforms` "rest" (local; a root joint is turned 180 degrees
+    about the up axis, its children's translations given in its turned frame), "bind"
+    (world) or "none"."""
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up == "Z" else UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+    UsdSkel.Root.Define(stage, "/Character")
+    for k, (tokens, positions) in enumerate(skeletons):
+        skeleton = UsdSkel.Skeleton.Define(stage, f"/Character/Skel{k}")
+        skeleton.CreateJointsAttr(Vt.TokenArray(tokens))
+        world = np.tile(np.eye(4), (len(tokens), 1, 1))
+        world[:, 3, :3] = positions
+        if tokens[0] == "Root":  # turned about the up axis (row vectors: p' = p @ M)
+            world[0, :3, :3] = np.diag([-1.0, -1.0, 1.0] if up == "Z" else [-1.0, 1.0, -1.0])
+        parents = UsdSkel.Topology(Vt.TokenArray(tokens)).GetParentIndices()
+        local = np.array(
+            [
+                w if p < 0 else w @ np.linalg.inv(world[p])
+                for w, p in zip(world, parents, strict=True)
+            ]
+        )
+        if transforms == "rest":
+            skeleton.CreateRestTransformsAttr(Vt.Matrix4dArray.FromNumpy(local))
+        elif transforms == "bind":
+            skeleton.CreateBindTransformsAttr(Vt.Matrix4dArray.FromNumpy(world))
+    stage.Save()

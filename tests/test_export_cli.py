@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from glb_edit import write_gltf
+from pxr import Usd, UsdGeom
 
 from db.store import PoseStore
 from export.bvh_writer import write_bvh
@@ -15,6 +17,7 @@ from export.humanoid import BONE_NAMES, HumanoidRig
 from export.motion import HumanoidMotion
 from export.retarget import bone_direction_errors, retarget
 from export.usd_reader import read_usd_joint_positions
+from export.usd_writer import write_usd
 from ingest.bvh import read_bvh
 from samba.cli import main
 from samba.skeleton import Body
@@ -116,13 +119,21 @@ def test_unknown_store_take_and_non_bvh_input(
     assert "take.mp4: not a .bvh file" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("avatar_name", ["small.glb", "small.gltf", "small.usda"])
 def test_an_avatar_file_gives_the_take_its_proportions(
-    tmp_path: Path, bvh_takes: list[Path]
+    tmp_path: Path, bvh_takes: list[Path], avatar_name: str
 ) -> None:
     small = HumanoidRig.from_body(Body.from_height(1.45), arm_angle_deg=45)
-    avatar = tmp_path / "small.glb"
+    avatar = tmp_path / avatar_name
     still = HumanoidMotion(small, np.tile([0.0, 0.0, 0.0, 1.0], (1, 17, 1)), small.rest[:1], 30)
-    write_glb(avatar, still)
+    if avatar.suffix == ".usda":
+        write_usd(avatar, still)
+    else:
+        write_glb(tmp_path / "source.glb", still)
+        if avatar.suffix == ".gltf":
+            write_gltf((tmp_path / "source.glb").read_bytes(), avatar, "small.bin")
+        else:
+            (tmp_path / "source.glb").rename(avatar)
     out = tmp_path / "walk.glb"
     assert run(bvh_takes[0], "--avatar", avatar, "-o", out) == 0
     names, positions = read_glb_joint_positions(out)
@@ -130,3 +141,29 @@ def test_an_avatar_file_gives_the_take_its_proportions(
         positions[:, names.index("LeftFoot")] - positions[:, names.index("LeftLowerLeg")], axis=-1
     )
     np.testing.assert_allclose(shin, np.linalg.norm(small.rest[13] - small.rest[12]), atol=1e-5)
+
+
+def test_a_bad_gltf_or_usd_avatar_is_one_error_line_naming_it(
+    tmp_path: Path, bvh_takes: list[Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    still = HumanoidMotion(
+        HumanoidRig.from_body(), np.tile([0.0, 0.0, 0.0, 1.0], (1, 17, 1)), np.zeros((1, 3)), 30
+    )
+    write_glb(tmp_path / "source.glb", still)
+    write_gltf((tmp_path / "source.glb").read_bytes(), tmp_path / "lost.gltf", "lost.bin")
+    (tmp_path / "lost.bin").unlink()
+    (tmp_path / "broken.gltf").write_text('{"asset": {"version": "2.0"}, "nodes": [')
+    stage = Usd.Stage.CreateNew(str(tmp_path / "empty.usda"))
+    UsdGeom.Xform.Define(stage, "/World")
+    stage.Save()
+    problems = {
+        "lost.gltf": f"buffer 0: cannot read its file {tmp_path / 'lost.bin'}",
+        "broken.gltf": "the file is not valid JSON",
+        "empty.usda": "no UsdSkel Skeleton prim in the file",
+    }
+    for name, problem in problems.items():
+        out = tmp_path / "walk.usda"
+        assert run(bvh_takes[0], "--avatar", tmp_path / name, "-o", out) == 1
+        err = capsys.readouterr().err
+        assert err.startswith(f"samba: error: {tmp_path / name}: {problem}")
+        assert err.count("\n") == 1 and not out.exists()
