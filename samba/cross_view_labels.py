@@ -23,6 +23,14 @@ when one explanation fits and no other comes near:
   comes near uses any of its blobs, and no other label lost in its new cameras projects
   as near the blob (within `ambiguity_px`).
 
+Knees and feet that no hypothesis above brings back (every knee's blob has the other
+knee's as a rival when the two stand at one height, and a foot is placed against its
+knee) are then labelled both legs at once by their shape (`samba.leg_labels`): among the
+unlabelled blobs' pairs (and a lone view paired with a blob), the one assignment whose
+shins keep the subject's length and whose left leg stands left of the right one; no
+blob is given that another marker projects within `MERGED_FACTOR` times `ambiguity_px`
+of.
+
 A label is also dropped from a camera's output when its views disagree
 (`_disagreeing`: a tracker that put it on another marker's blob; where the view meets
 none of the label's other views while two of those meet, `outvoted` names it, and the
@@ -41,13 +49,14 @@ of a 160-pixel-wide, 60-degree camera (`REFERENCE_FOCAL_PX`), scaled per camera.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from itertools import combinations
 
 import numpy as np
 
 from samba.camera import CameraGroup
 from samba.errors import InputError
+from samba.leg_labels import KNOWN, LEG_MARKERS, LegBody, LegSettings, ShinMeter, assign_legs
 from samba.marker_tracking import FOLLOWS, REFERENCE_FOCAL_PX
 from samba.skeleton import N_MARKERS
 from samba.triangulation import Triangulation
@@ -61,23 +70,33 @@ that distance in the standard pose: the shoulders' and a knee-to-foot distance h
 change; a wrist comes close to its shoulder, a knee closer in a deep squat."""
 RIVAL_ERROR_FACTOR = 2.0
 """A hypothesis comes near when it reprojects within this multiple of `epipolar_px`."""
+MERGED_FACTOR = 4.0
+"""A label found by the legs' shape is not given a blob that another marker projects
+within this multiple of `ambiguity_px` of: the blob may be both markers merged, or about
+to be, and the camera's tracker may then follow the wrong one (at 2 a wrist and a foot
+crossing in one camera swapped labels on a martial-arts take with two cameras, 11
+frames; 3 still did)."""
 
 
 @dataclass(frozen=True)
 class CrossViewSettings:
-    """Tolerances of `CrossViewLabeller`: `epipolar_px` reprojection error (reference
-    pixels, scaled per camera); the 3D gate `gate_m`, growing by `gate_growth_m` per
+    """Tolerances of `CrossViewLabeller`: `epipolar_px` reprojection error and
+    `ambiguity_px` how near a marker's projection makes a blob possibly its (reference
+    pixels, scaled per camera; 1.0 before the legs' labelling, whose labels then kept a
+    blob of two feet merged at 160x120); the 3D gate `gate_m`, growing by `gate_growth_m` per
     frame a label is lost up to `max_gate_m`; `rival_margin_m` how much farther than the
-    gate a rival hypothesis still counts."""
+    gate a rival hypothesis still counts; `legs` the tolerances of labelling both legs'
+    lost markers at once by their shape (`samba.leg_labels`; None: not done)."""
 
     epipolar_px: float = 1.0
-    ambiguity_px: float = 1.0
+    ambiguity_px: float = 1.5
     gate_m: float = 0.10
     gate_growth_m: float = 0.02
     max_gate_m: float = 0.40
     rival_margin_m: float = 0.10
     reach_m: float = 1.0
     span_slack_m: float = 0.05
+    legs: LegSettings | None = field(default_factory=LegSettings)
 
 
 @dataclass(frozen=True)
@@ -137,6 +156,8 @@ class CrossViewLabeller:
             [standing * np.array(SHORTEST_SPAN), standing + self.settings.span_slack_m], axis=-1
         )
         self._lost = np.zeros(N_MARKERS, dtype=np.int64)
+        self._body = LegBody.from_markers(initial)
+        self._shins = ShinMeter()
         self.outvoted = np.zeros((len(cameras), N_MARKERS), dtype=bool)
         """(c, 8) bool: the labels the last `step` dropped because their view meets none
         of the marker's other views while two of those meet (`_outvoted`): that
@@ -192,6 +213,11 @@ class CrossViewLabeller:
                         found.append(Reacquisition(int(camera), label, (float(u), float(v))))
             if found:
                 current = self._triangulate(labelled).points
+        if self.settings.legs is not None:
+            legs = self._legs(labelled, blobs, current, prediction, self.settings.legs)
+            if legs:
+                found += legs
+                current = self._triangulate(labelled).points
         fresh = np.where((self._lost <= FRESH_FRAMES)[:, None], prediction, np.nan)
         positions = np.where(np.isnan(current), fresh, current)
         self._remember(current, prediction)
@@ -199,6 +225,83 @@ class CrossViewLabeller:
         self.outvoted = self._outvoted(labelled, disagreeing.any(axis=0))
         labelled[self._merged(labelled, positions) | disagreeing | self.outvoted] = np.nan
         return labelled, found
+
+    def _legs(
+        self,
+        labelled: np.ndarray,
+        blobs: list[np.ndarray],
+        current: np.ndarray,
+        prediction: np.ndarray,
+        settings: LegSettings,
+    ) -> list[Reacquisition]:
+        """Knee and foot labels not triangulated found by the legs' shape
+        (`samba.leg_labels.assign_legs`) in the blobs still unlabelled (`labelled` (c, 8,
+        2) raw pixels, filled in place): a label lost in every camera among the pairs of
+        those blobs of two cameras, a label seen in one camera among its view paired with
+        one of them; pairs that meet within `epipolar_px`. `current` (8, 3) the markers
+        triangulated now, `prediction` (8, 3) where the others are predicted (`predicted`):
+        a label is not given a blob another marker may be merged with (`_near_other`);
+        `settings` those of `assign_legs`."""
+        views = ~np.isnan(labelled).any(axis=-1)  # (c, 8)
+        lost = np.isnan(current[LEG_MARKERS]).any(axis=-1) & (views[:, LEG_MARKERS].sum(0) < 2)
+        open_legs = LEG_MARKERS[lost]
+        if not len(open_legs):
+            return []
+        free = [
+            b[~(b[:, None] == labelled[camera][None]).all(axis=-1).any(axis=1)]
+            for camera, b in enumerate(blobs)
+        ]
+        pixels, index = _blob_pairs(free)
+        owner = np.full(pixels.shape[1], -1)  # -1: any label lost everywhere
+        for label in open_legs[views[:, open_legs].any(axis=0)]:
+            pix, idx = _view_pairs(labelled[:, label], free)
+            pixels = np.concatenate([pixels, pix], axis=1)
+            index = np.concatenate([index, idx], axis=1)
+            owner = np.concatenate([owner, np.full(idx.shape[1], label)])
+        if not pixels.shape[1]:
+            return []
+        result = self._triangulate(pixels)
+        meet = np.nanmax(result.view_error / self._tolerance[:, None], axis=0) <= 1.0
+        lost_everywhere = ~views.any(axis=0)
+        allowed = np.where(
+            owner < 0, lost_everywhere[:, None], np.arange(N_MARKERS)[:, None] == owner
+        )
+        choice = assign_legs(
+            current,
+            result.points[meet],
+            index[:, meet],
+            allowed[:, meet],
+            self._body.scaled(self._shins.shins),
+            settings,
+        )
+        placed = np.flatnonzero(choice != KNOWN)
+        positions = np.where(np.isnan(current), prediction, current)
+        positions[placed] = result.points[meet][choice[placed]]
+        projected = self.cameras.project(positions)  # (c, 8, 2)
+        found = []
+        for label in placed:
+            chosen = index[:, meet][:, choice[label]]
+            taken = [
+                (camera, free[camera][blob]) for camera, blob in enumerate(chosen) if blob >= 0
+            ]
+            if any(
+                self._near_other(projected[camera], label, pixel, camera) for camera, pixel in taken
+            ):
+                continue
+            for camera, (u, v) in taken:
+                labelled[camera, label] = (u, v)
+                found.append(Reacquisition(camera, int(label), (float(u), float(v))))
+        return found
+
+    def _near_other(
+        self, projected: np.ndarray, label: int, pixel: np.ndarray, camera: int
+    ) -> bool:
+        """Whether a marker other than `label` projects (`projected` (8, 2) raw pixels of
+        `camera`) within `MERGED_FACTOR` times `ambiguity_px` of the blob at `pixel`
+        (2,): the blob may be both markers merged."""
+        gap = np.linalg.norm(np.delete(projected, label, axis=0) - pixel, axis=-1)
+        with np.errstate(invalid="ignore"):
+            return bool((gap < MERGED_FACTOR * self._ambiguity[camera]).any())
 
     def _triangulate(self, raw: np.ndarray, gate_px: float | None = None) -> Triangulation:
         """Triangulation of raw pixels (c, n, 2) with the views' errors in pixels; views
@@ -306,6 +409,7 @@ class CrossViewLabeller:
     def _remember(self, current: np.ndarray, prediction: np.ndarray) -> None:
         """Keep this frame's positions (triangulated, else predicted) for the next one."""
         seen = ~np.isnan(current).any(axis=-1)
+        self._shins.add(current)
         self._last = np.where(seen[:, None], current, prediction)
         self._lost = np.where(seen, 0, self._lost + 1)
 
@@ -319,31 +423,57 @@ def _hypotheses(labelled: np.ndarray, blobs: list[np.ndarray]) -> _Hypotheses:
     labels, pixels, indices = [], [], []
     for label in range(N_MARKERS):
         if lost[:, label].all():
-            for a, b in combinations(range(c), 2):
-                ia, ib = np.meshgrid(np.arange(len(blobs[a])), np.arange(len(blobs[b])))
-                ia, ib = ia.ravel(), ib.ravel()
-                pix = np.full((c, len(ia), 2), np.nan)
-                pix[a], pix[b] = blobs[a][ia], blobs[b][ib]
-                idx = np.full((c, len(ia)), -1)
-                idx[a], idx[b] = ia, ib
-                labels.append(np.full(len(ia), label))
-                pixels.append(pix)
-                indices.append(idx)
-            continue
-        for camera in np.flatnonzero(lost[:, label]):
-            k = len(blobs[camera])
-            pix = np.repeat(labelled[:, label, None], k, axis=1)
-            pix[camera] = blobs[camera]
-            idx = np.full((c, k), -1)
-            idx[camera] = np.arange(k)
-            labels.append(np.full(k, label))
+            pix, idx = _blob_pairs(blobs)
+            labels.append(np.full(idx.shape[1], label))
             pixels.append(pix)
             indices.append(idx)
+            continue
+        pix, idx = _view_pairs(labelled[:, label], blobs)
+        labels.append(np.full(idx.shape[1], label))
+        pixels.append(pix)
+        indices.append(idx)
     if not labels:
         return _Hypotheses(np.zeros(0, int), np.zeros((c, 0, 2)), np.zeros((c, 0), int))
     return _Hypotheses(
         np.concatenate(labels), np.concatenate(pixels, axis=1), np.concatenate(indices, axis=1)
     )
+
+
+def _blob_pairs(blobs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of blobs of two cameras, from per-camera blobs (k_c, 2) raw pixels: their
+    pixels (c, h, 2), NaN in the other cameras, and their blob indices (c, h), -1 there."""
+    c = len(blobs)
+    pixels, indices = [np.zeros((c, 0, 2))], [np.zeros((c, 0), dtype=np.int64)]
+    for a, b in combinations(range(c), 2):
+        ia, ib = np.meshgrid(np.arange(len(blobs[a])), np.arange(len(blobs[b])))
+        ia, ib = ia.ravel(), ib.ravel()
+        pix = np.full((c, len(ia), 2), np.nan)
+        pix[a], pix[b] = blobs[a][ia], blobs[b][ib]
+        idx = np.full((c, len(ia)), -1)
+        idx[a], idx[b] = ia, ib
+        pixels.append(pix)
+        indices.append(idx)
+    return np.concatenate(pixels, axis=1), np.concatenate(indices, axis=1)
+
+
+def _view_pairs(view: np.ndarray, blobs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """A label's views `view` (c, 2) raw pixels (NaN in the cameras that lost it) with
+    each blob (k_c, 2) of one camera that lost it: pixels (c, h, 2) and the blob indices
+    (c, h), -1 in the cameras without a new blob."""
+    c = len(blobs)
+    seen = np.flatnonzero(~np.isnan(view).any(axis=-1))
+    pixels, indices = [np.zeros((c, 0, 2))], [np.zeros((c, 0), dtype=np.int64)]
+    for camera in range(c):
+        if camera in seen:
+            continue
+        k = len(blobs[camera])
+        pix = np.repeat(view[:, None], k, axis=1)
+        pix[camera] = blobs[camera]
+        idx = np.full((c, k), -1)
+        idx[camera] = np.arange(k)
+        pixels.append(pix)
+        indices.append(idx)
+    return np.concatenate(pixels, axis=1), np.concatenate(indices, axis=1)
 
 
 def _standing(hypotheses: _Hypotheses, fits: np.ndarray, near: np.ndarray) -> np.ndarray:
