@@ -27,9 +27,9 @@ Knees and feet that no hypothesis above brings back (every knee's blob has the o
 knee's as a rival when the two stand at one height, and a foot is placed against its
 knee) are then labelled both legs at once by their shape (`samba.leg_labels`): among the
 unlabelled blobs' pairs (and a lone view paired with a blob), the one assignment whose
-shins keep the subject's length and whose left leg stands left of the right one; no
-blob is given that another marker projects within `MERGED_FACTOR` times `ambiguity_px`
-of.
+shins keep the subject's length and whose left leg stands left of the right one, found
+again in the next frame (within `LEG_CONFIRM_M`); no blob is given that another marker
+projects within `MERGED_FACTOR` times `ambiguity_px` of.
 
 A label is also dropped from a camera's output when its views disagree
 (`_disagreeing`: a tracker that put it on another marker's blob; where the view meets
@@ -70,12 +70,18 @@ that distance in the standard pose: the shoulders' and a knee-to-foot distance h
 change; a wrist comes close to its shoulder, a knee closer in a deep squat."""
 RIVAL_ERROR_FACTOR = 2.0
 """A hypothesis comes near when it reprojects within this multiple of `epipolar_px`."""
+LEG_CONFIRM_M = 0.15
+"""The legs' labelling gives labels only when the frame before found the same labels
+within this distance (m) of where it finds them now: a ghost that fits the shins in one
+frame seldom fits again where the legs moved (without it a synthetic walk's left knee
+went on a ghost of the two wrists' blobs, 64 label swaps); at 30 fps a foot moves up to
+about 13 cm a frame."""
 MERGED_FACTOR = 4.0
 """A label found by the legs' shape is not given a blob that another marker projects
 within this multiple of `ambiguity_px` of: the blob may be both markers merged, or about
-to be, and the camera's tracker may then follow the wrong one (at 2 a wrist and a foot
-crossing in one camera swapped labels on a martial-arts take with two cameras, 11
-frames; 3 still did)."""
+to be, and the camera's tracker may then follow the wrong one (at 2, without
+`LEG_CONFIRM_M`, a wrist and a foot crossing in one camera swapped labels on a
+martial-arts take with two cameras, 11 frames; 3 still did)."""
 
 
 @dataclass(frozen=True)
@@ -158,6 +164,7 @@ class CrossViewLabeller:
         self._lost = np.zeros(N_MARKERS, dtype=np.int64)
         self._body = LegBody.from_markers(initial)
         self._shins = ShinMeter()
+        self._pending_legs = np.full((N_MARKERS, 3), np.nan)
         self.outvoted = np.zeros((len(cameras), N_MARKERS), dtype=bool)
         """(c, 8) bool: the labels the last `step` dropped because their view meets none
         of the marker's other views while two of those meet (`_outvoted`): that
@@ -238,10 +245,12 @@ class CrossViewLabeller:
         (`samba.leg_labels.assign_legs`) in the blobs still unlabelled (`labelled` (c, 8,
         2) raw pixels, filled in place): a label lost in every camera among the pairs of
         those blobs of two cameras, a label seen in one camera among its view paired with
-        one of them; pairs that meet within `epipolar_px`. `current` (8, 3) the markers
-        triangulated now, `prediction` (8, 3) where the others are predicted (`predicted`):
-        a label is not given a blob another marker may be merged with (`_near_other`);
-        `settings` those of `assign_legs`."""
+        one of them; pairs that meet within `epipolar_px`. Only an assignment the frame
+        before found too (within `LEG_CONFIRM_M`) gives labels. `current` (8, 3) the
+        markers triangulated now, `prediction` (8, 3) where the others are predicted
+        (`predicted`; trusted for `FRESH_FRAMES`): a label is not given a blob another
+        marker may be merged with (`_near_other`); `settings` those of `assign_legs`."""
+        pending, self._pending_legs = self._pending_legs, np.full((N_MARKERS, 3), np.nan)
         views = ~np.isnan(labelled).any(axis=-1)  # (c, 8)
         lost = np.isnan(current[LEG_MARKERS]).any(axis=-1) & (views[:, LEG_MARKERS].sum(0) < 2)
         open_legs = LEG_MARKERS[lost]
@@ -275,8 +284,14 @@ class CrossViewLabeller:
             settings,
         )
         placed = np.flatnonzero(choice != KNOWN)
-        positions = np.where(np.isnan(current), prediction, current)
+        fresh = np.where((self._lost <= FRESH_FRAMES)[:, None], prediction, np.nan)
+        positions = np.where(np.isnan(current), fresh, current)
         positions[placed] = result.points[meet][choice[placed]]
+        self._pending_legs[placed] = positions[placed]
+        with np.errstate(invalid="ignore"):
+            moved = np.linalg.norm(positions[placed] - pending[placed], axis=-1)
+        if not (moved <= LEG_CONFIRM_M).all():
+            return []
         projected = self.cameras.project(positions)  # (c, 8, 2)
         found = []
         for label in placed:

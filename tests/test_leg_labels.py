@@ -3,16 +3,18 @@ through `samba.cross_view_labels.CrossViewLabeller`)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.camera import CameraGroup
 from samba.camera_chain import ChainSettings, run_chain
 from samba.cross_view_labels import FRESH_FRAMES, CrossViewLabeller, CrossViewSettings
 from samba.leg_labels import KNOWN, LegBody, ShinMeter, assign_legs
-from samba.observation import spread_cameras
+from samba.observation import evaluation_cameras, spread_cameras
 from samba.skeleton import markers_of, standing_pose
-from samba.synthetic import generate
 from samba.synthetic_cameras import with_size
 
 LEGS = [4, 5, 6, 7]  # left knee, right knee, left foot, right foot
@@ -52,14 +54,18 @@ def _stride(markers: np.ndarray, step_m: float, apart_m: float = 0.1) -> np.ndar
 def _find_legs(
     markers: np.ndarray, moved: np.ndarray, settings: CrossViewSettings | None = None
 ) -> tuple[np.ndarray, np.ndarray, set[tuple[int, int]]]:
-    """Lose the legs, then show them at `moved` in both cameras as unlabelled blobs:
-    the labels out (2, 8, 2), the true pixels (2, 8, 2) and the (camera, label) found."""
+    """Lose the legs, then show them at `moved` in both cameras as unlabelled blobs for
+    two frames: the labels out of the second (2, 8, 2), the true pixels (2, 8, 2) and
+    the (camera, label) found there. The first frame finds nothing: an assignment must
+    be seen twice (`LEG_CONFIRM_M`)."""
     cameras = _cameras()
     labeller = CrossViewLabeller(cameras, markers, settings)
     _legs_lost(labeller, cameras.project(markers))
     pixels = cameras.project(moved)
     labelled = pixels.copy()
     labelled[:, LEGS] = np.nan
+    _, first = labeller.step(labelled, [pixels[c, LEGS] for c in range(2)])
+    assert first == []
     out, found = labeller.step(labelled, [pixels[c, LEGS] for c in range(2)])
     return out, pixels, {(f.camera, f.label) for f in found}
 
@@ -70,6 +76,20 @@ def test_legs_lost_in_both_cameras_are_found_by_their_shape(markers: np.ndarray)
     out, pixels, found = _find_legs(markers, _stride(markers, 0.15))
     np.testing.assert_allclose(out[:, LEGS], pixels[:, LEGS])
     assert found == {(c, label) for c in range(2) for label in LEGS}
+
+
+def test_legs_that_jump_between_frames_are_not_labelled(markers: np.ndarray) -> None:
+    # Two frames that each fit, 30 cm apart: a coincidence (a ghost that fits the shins
+    # in one frame), not legs that moved.
+    cameras = _cameras()
+    labeller = CrossViewLabeller(cameras, markers)
+    _legs_lost(labeller, cameras.project(markers))
+    for step_m in (0.0, 0.15):
+        pixels = cameras.project(_stride(markers, step_m))
+        labelled = pixels.copy()
+        labelled[:, LEGS] = np.nan
+        _, found = labeller.step(labelled, [pixels[c, LEGS] for c in range(2)])
+        assert found == []
 
 
 def test_without_the_legs_rule_they_stay_lost(markers: np.ndarray) -> None:
@@ -126,9 +146,12 @@ def test_shin_meter_measures_the_subject(markers: np.ndarray) -> None:
     np.testing.assert_allclose(scaled.shins, [standing[0], standing[1] + 0.04])
 
 
-def test_two_cameras_keep_more_leg_markers_without_swaps() -> None:
-    poses = generate("walk", seconds=4, fps=30, seed=5).poses
-    cameras = [with_size(c, (320, 240)) for c in spread_cameras(poses, 2)]
+def test_two_cameras_keep_more_leg_markers_of_held_out_motion(cmu_files: list[Path]) -> None:
+    # The camera issue's held-out take, two evaluation cameras at 160x120: without the
+    # legs' labelling its knees and feet are lost for good after the lead-in.
+    path = next(f for f in cmu_files if f.name == "iclone_007_05.bvh")
+    poses = load_bvh_take(path, BvhImportOptions(skip_tpose=True)).poses
+    cameras = evaluation_cameras(poses)
     without = run_chain(
         poses, cameras, 30.0, ChainSettings(cross_view=CrossViewSettings(legs=None))
     )
@@ -136,5 +159,6 @@ def test_two_cameras_keep_more_leg_markers_without_swaps() -> None:
     assert with_legs.swaps() == 0
     assert with_legs.phantoms() == 0
     legs = slice(4, 8)
-    assert with_legs.reconstructed[:, legs].mean() > without.reconstructed[:, legs].mean()
+    assert without.reconstructed[:, legs].mean() < 0.05
+    assert with_legs.reconstructed[:, legs].mean() > 0.1
     assert with_legs.rms_error() < 0.015
