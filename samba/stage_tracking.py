@@ -26,7 +26,8 @@ left, or every view was blocked) looks for it again in every frame's blobs: stan
 the standard pose anywhere on the stage, facing the front as at the start
 (`samba.standard_pose_search`; the front is the start's heading, or with `from_labels`
 the heading of the first frame whose markers all triangulated). When found, every
-camera's tracker and the cross-view labelling start again from there. Two cameras
+camera's tracker and the cross-view labelling start again from there, once the search
+has found the subject standing still (`STILL_FRAMES`). Two cameras
 search too: on 300 random standing subjects (0.3 px noise, 3 stray spots per camera)
 the search found 89% with no label on a wrong blob (three cameras: 90%, one frame with
 a wrong label), and on 395 frames of four CMU takes in other poses it fired 8 times,
@@ -50,6 +51,14 @@ from samba.triangulation import triangulate_cameras
 MIN_TRIANGULATED = 3
 """Fewer markers triangulated than this (the fewest a reconstruction uses) and the stage
 has lost the subject: it searches for the standard pose."""
+STILL_FRAMES = 5
+"""The search's find is taken once it has found the subject in this many frames in a
+row, turned by at most `STILL_DEG` over them: a subject coming back stands in the
+standard pose, while one turning on the spot shows an A-pose that looks the same from
+behind at every heading, and a find of it facing the front can be one facing away with
+left and right swapped (a synthetic turn with two cameras: 450 label swaps)."""
+STILL_DEG = 10.0
+"""Most the subject's heading (degrees) may change over the `STILL_FRAMES` finds."""
 
 
 class StageTracker:
@@ -81,6 +90,7 @@ class StageTracker:
         self._labeller = None
         self._searches = search
         self._search: StandardPoseSearch | None = None
+        self._finds: list[float] = []
         self.searches = 0
         """How often the subject was found again in the standard pose."""
         if cross_view is not None and initial is not None:
@@ -191,7 +201,13 @@ class StageTracker:
         assert self._search is not None
         found = self._search.find(centroids)
         if found is None:
+            self._finds.clear()
             return labelled
+        self._finds = [*self._finds, heading_of(found.points[list(SHOULDERS)])][-STILL_FRAMES:]
+        spread = np.degrees(np.ptp(np.unwrap(np.radians(self._finds))))
+        if len(self._finds) < STILL_FRAMES or spread > STILL_DEG:
+            return labelled
+        self._finds.clear()
         self.trackers = [
             MarkerTracker(start, tracker.settings)
             for tracker, start in zip(self.trackers, found.labels, strict=True)

@@ -17,8 +17,8 @@ from samba.cross_view_labels import CrossViewSettings
 from samba.errors import InputError
 from samba.lead_in import standing_lead_in
 from samba.observation import spread_cameras
-from samba.skeleton import markers_of
-from samba.stage_tracking import StageTracker
+from samba.skeleton import markers_of, standing_pose
+from samba.stage_tracking import STILL_FRAMES, StageTracker
 from samba.standard_pose_search import StandardPoseSearch
 from samba.synthetic import generate, random_standing
 from samba.synthetic_cameras import detected_blobs, with_size
@@ -130,6 +130,34 @@ def test_a_stage_that_lost_the_subject_finds_it_standing_elsewhere(
     assert stage.searches >= 1
     assert wrong == 0
     assert given >= 0.9 * visible
+
+
+def test_a_subject_turning_on_the_spot_is_not_taken_for_one_facing_the_front() -> None:
+    """The standard pose looks the same from behind: a find is taken only after the
+    subject stood still in it for `STILL_FRAMES` frames, not while it turns (facing away,
+    it would be found facing the front with left and right swapped)."""
+    rng = np.random.default_rng(4)
+    start = markers_of(standing_pose())
+    cameras = _cameras(np.repeat(standing_pose()[None], 2, axis=0))
+    stage = StageTracker.from_labels(
+        cameras, cameras.project(start), cross_view=CrossViewSettings()
+    )
+    stage.step(detected_blobs(cameras, start, rng)[1])
+    for _ in range(round(FPS)):  # gone for a second: no label is fresh
+        assert np.isnan(stage.step([np.zeros((0, 2))] * len(cameras))).all()
+    for heading in range(120, 244, 4):  # turning past the back, 4 degrees a frame
+        blobs = detected_blobs(cameras, markers_of(standing_pose(heading_deg=heading)), rng)[1]
+        assert np.isnan(stage.step(blobs)).all()  # its back looks like a front, mirrored
+    assert stage.searches == 0
+    assert np.isnan(stage.step([np.zeros((0, 2))] * len(cameras))).all()  # a frame away
+    pixels, blobs = detected_blobs(cameras, start, rng)
+    for _ in range(STILL_FRAMES - 1):
+        assert np.isnan(stage.step(blobs)).all()
+    labels = stage.step(blobs)
+    assert stage.searches == 1
+    seen = ~np.isnan(labels[..., 0])
+    assert seen.sum() >= 0.9 * seen.size
+    np.testing.assert_allclose(labels[seen], pixels[seen])
 
 
 def test_a_live_session_counts_the_subject_found_again(
