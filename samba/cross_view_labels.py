@@ -275,18 +275,13 @@ class CrossViewLabeller:
         allowed = np.where(
             owner < 0, lost_everywhere[:, None], np.arange(N_MARKERS)[:, None] == owner
         )
-        choice = assign_legs(
-            current,
-            result.points[meet],
-            index[:, meet],
-            allowed[:, meet],
-            self._body.scaled(self._shins.shins),
-            settings,
-        )
+        points, index = result.points[meet], index[:, meet]
+        body = self._body.scaled(self._shins.shins)
+        choice = assign_legs(current, points, index, allowed[:, meet], body, settings)
         placed = np.flatnonzero(choice != KNOWN)
         fresh = np.where((self._lost <= FRESH_FRAMES)[:, None], prediction, np.nan)
         positions = np.where(np.isnan(current), fresh, current)
-        positions[placed] = result.points[meet][choice[placed]]
+        positions[placed] = points[choice[placed]]
         self._pending_legs[placed] = positions[placed]
         with np.errstate(invalid="ignore"):
             moved = np.linalg.norm(positions[placed] - pending[placed], axis=-1)
@@ -295,7 +290,7 @@ class CrossViewLabeller:
         projected = self.cameras.project(positions)  # (c, 8, 2)
         found = []
         for label in placed:
-            chosen = index[:, meet][:, choice[label]]
+            chosen = index[:, choice[label]]
             taken = [
                 (camera, free[camera][blob]) for camera, blob in enumerate(chosen) if blob >= 0
             ]

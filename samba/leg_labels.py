@@ -115,8 +115,8 @@ def assign_legs(
     `current` (8, 3) meters: the markers triangulated this frame (NaN where not); the
     shoulders must be among them. `points` (p, 3) meters: candidate points; `blobs` (c,
     p) the unlabelled blob of each camera each is made of (-1: none), so that no two
-    labels share a blob; `allowed` (8, p) bool: the candidates each label may take.
-    After the assignment all four knees and feet must have a place. Returns (8,) the
+    labels share a blob; `allowed` (8, p) bool: the candidates each label may take (a
+    knee or foot to place without one: nothing is placed). Returns (8,) the
     candidate index per label, `KNOWN` for a label not placed; all `KNOWN` when no
     assignment fits or when two that fit disagree.
     """
@@ -137,7 +137,7 @@ def assign_legs(
         used = chosen[chosen >= 0]
         if not len(used) or len(set(used.tolist())) < len(used) or _share_blobs(blobs, used):
             continue
-        gap = (left_at - right_at) @ across  # (2,): knees, feet; NaN: a marker unknown
+        gap = (left_at - right_at) @ across  # (2,): knees, feet
         if (gap >= s.side_margin_m).all():
             fitting.append((chosen, np.concatenate([left_at, right_at])))
     if not fitting:
@@ -159,16 +159,16 @@ def _side_options(
     s: LegSettings,
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """The (knee, foot) choices of one side that fit: candidate indices (2,) (`KNOWN`
-    where triangulated) and their positions (2, 3); a side with nothing to place, or a
-    marker to place without candidates, keeps what is triangulated (NaN elsewhere)."""
+    where triangulated) and their positions (2, 3); a side with nothing to place keeps
+    its triangulated knee and foot."""
     shoulder, knee, foot = LEGS[side]
     open_labels = np.isnan(current[[knee, foot]]).any(axis=-1)
+    if not open_labels.any():
+        return [(np.array([KNOWN, KNOWN]), current[[knee, foot]])]
     options = [
         np.flatnonzero(allowed[label]) if missing else np.array([KNOWN])
         for label, missing in zip((knee, foot), open_labels, strict=True)
     ]
-    if not open_labels.any() or not all(len(o) for o in options):
-        return [(np.array([KNOWN, KNOWN]), current[[knee, foot]])]
     k, f = (grid.ravel() for grid in np.meshgrid(*options, indexing="ij"))
     knees = np.where((k >= 0)[:, None], points[k], current[knee])
     feet = np.where((f >= 0)[:, None], points[f], current[foot])
