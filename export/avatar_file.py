@@ -4,17 +4,19 @@
 Bones are found by the VRM humanoid table when the file has one (`VRMC_vrm` or `VRM`
 extension), otherwise by node name (glTF) or the last path component of the joint
 tokens (USD): Unity / VRM humanoid names ("LeftUpperArm", "leftUpperArm") or Mixamo
-names ("mixamorig:LeftArm"), compared without case, spaces, underscores and a
-"namespace:" prefix. Hips, Head and both arms' and legs' three bones are required;
-Spine, Chest and Neck are placed on the line from the hips to the middle of the
-shoulders where the avatar lacks them. The rest pose is the file's node transforms
-(glTF) or the UsdSkel Skeleton's rest transforms, else its bind transforms (USD: the
-first Skeleton that has every required bone), in meters with +Y up; a model facing -Z
-(VRM 0.x) is turned to face +Z, as the retargeting expects.
+names ("mixamorig:LeftArm", "mixamorig_LeftArm"), compared without case, spaces,
+underscores, a "namespace:" prefix and Mixamo's "mixamorig" prefix. Hips, Head and
+both arms' and legs' three bones are required; Spine, Chest and Neck are placed on the
+line from the hips to the middle of the shoulders where the avatar lacks them. The rest
+pose is the file's node transforms (glTF) or the UsdSkel Skeleton's rest transforms,
+else its bind transforms (USD: the first Skeleton that has every required bone), in
+meters with +Y up; a model facing -Z (VRM 0.x) is turned to face +Z, as the
+retargeting expects.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -54,6 +56,9 @@ _ALIASES: dict[str, tuple[str, ...]] = {
 USD_SUFFIXES: tuple[str, ...] = (".usd", ".usda", ".usdc")
 """Suffixes (any letter case) of the avatars read as USD: `export.usd_writer.SUFFIXES`,
 spelt out so that reading a glTF avatar does not load usd-core."""
+
+_MIXAMO_PREFIX = re.compile(r"^mixamorig\d*")
+"""Mixamo's bone-name prefix, as `_plain` leaves it of an underscored name."""
 
 MIN_BONE_M = 1e-3
 """Shortest bone (meters, rest pose) an avatar may have: a bone of zero length has no
@@ -168,7 +173,11 @@ def _named_bones(names: Sequence[str]) -> dict[str, int]:
 
 
 def _plain(name: str) -> str:
-    return name.rsplit(":", 1)[-1].replace("_", "").replace(" ", "").lower()
+    """A node or joint name without a "namespace:" prefix, case, spaces, underscores and
+    Mixamo's "mixamorig" prefix: Blender's USD export writes "mixamorig:Hips" as
+    "mixamorig_Hips", and some Mixamo downloads number it ("mixamorig1:Hips")."""
+    plain = name.rsplit(":", 1)[-1].replace("_", "").replace(" ", "").lower()
+    return _MIXAMO_PREFIX.sub("", plain)
 
 
 def _fill_spine(rest: np.ndarray) -> None:

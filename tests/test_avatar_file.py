@@ -252,6 +252,18 @@ def test_a_z_up_centimetre_usd_stage_gives_the_rig_in_meters_y_up(
     np.testing.assert_allclose(rig.rest, AVATAR_RIG.rest, atol=1e-6)
 
 
+@pytest.mark.parametrize("prefix", ["mixamorig_", "mixamorig1_"])
+def test_a_blender_usd_of_a_mixamo_rig_is_read_by_its_names(tmp_path: Path, prefix: str) -> None:
+    """Blender's USD export writes Mixamo's "mixamorig:LeftArm" as "mixamorig_LeftArm"
+    (numbered in some downloads)."""
+    tokens, positions = _turned_skeleton(AVATAR_RIG)
+    renamed = {name: MIXAMO[name].replace("mixamorig:", prefix) for name in MIXAMO}
+    tokens = ["/".join(renamed.get(part, part) for part in token.split("/")) for token in tokens]
+    path = tmp_path / "mixamo.usda"
+    _usd_avatar(path, [(tokens, positions)], "rest", meters_per_unit=0.01, up="Z")
+    np.testing.assert_allclose(read_avatar_rig(path).rest, AVATAR_RIG.rest, atol=1e-6)
+
+
 def test_of_several_usd_skeletons_the_humanoid_one_is_taken(tmp_path: Path) -> None:
     prop = (["Sword", "Sword/Blade"], np.array([[0.0, 1.0, 0.0], [0.0, 1.5, 0.0]]))
     tokens, positions = _turned_skeleton(AVATAR_RIG)
