@@ -74,13 +74,14 @@ def test_signed_packets_and_bad_datagrams(
             assert live.server is not None
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
                 good = live_capture.packet(0, 0, time.time(), "stage")
+                signed = encode(good, key)
                 for data in (
                     b"",
                     b"x" * 300,
                     b"GIF89a" + bytes(94),
                     encode(good),  # unsigned while the server has a key
                     encode(good, b"wrong key, 32 bytes long........"),
-                    encode(good, key)[:-1] + b"\x00",
+                    signed[:-1] + bytes([signed[-1] ^ 0xFF]),  # the tag's last byte changed
                     encode(live_capture.packet(0, 1, time.time(), "other"), key),
                     encode(good, key),
                 ):
