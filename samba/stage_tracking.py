@@ -181,6 +181,7 @@ class StageTracker:
         seen = (~np.isnan(labelled).any(axis=-1)).sum(axis=0) >= 2
         if self._search is not None and seen.sum() < MIN_TRIANGULATED:
             return self._search_again(centroids, labelled)
+        self._finds.clear()  # the finds must come in a row, while the subject is lost
         return labelled
 
     def _start_labeller(self, points: np.ndarray) -> None:
