@@ -131,6 +131,25 @@ def test_assign_legs_refuses_two_fitting_answers_that_disagree(markers: np.ndarr
     np.testing.assert_array_equal(chosen[LEGS], [0, 1, 2, 3])
 
 
+def test_assign_legs_needs_the_shoulders_and_candidates(markers: np.ndarray) -> None:
+    body = LegBody.from_markers(markers)
+    current = markers.copy()
+    current[LEGS] = np.nan
+    points = markers[LEGS]
+    blobs = np.arange(4)[None, :].repeat(2, axis=0)
+    allowed = np.zeros((8, 4), dtype=bool)
+    allowed[LEGS] = True
+    assert (assign_legs(current, points, blobs, allowed, body)[LEGS] >= 0).all()
+    no_shoulder = current.copy()
+    no_shoulder[1] = np.nan
+    assert (assign_legs(no_shoulder, points, blobs, allowed, body) == KNOWN).all()
+    none = np.zeros((0, 3))
+    assert (assign_legs(current, none, blobs[:, :0], allowed[:, :0], body) == KNOWN).all()
+    one_short = allowed.copy()
+    one_short[6] = False  # the left foot may take no candidate: nothing is placed
+    assert (assign_legs(current, points, blobs, one_short, body) == KNOWN).all()
+
+
 def test_shin_meter_measures_the_subject(markers: np.ndarray) -> None:
     meter = ShinMeter()
     assert np.isnan(meter.shins).all()
