@@ -88,22 +88,27 @@ def _gltf_bones(path: str | Path) -> dict[str, np.ndarray]:
 
 def _usd_bones(path: str | Path) -> dict[str, np.ndarray]:
     """Humanoid bone name -> rest position (3,) in meters, +Y up, of the first humanoid
-    UsdSkel Skeleton of a USD avatar, its joints found by name."""
+    UsdSkel Skeleton of a USD avatar, its joints found by name; a Skeleton that cannot be
+    posed is passed over when another one is humanoid."""
     from export.usd_reader import read_usd_skeleton_rests  # pxr loads only for USD avatars
 
-    found = []
-    for skeleton in read_usd_skeleton_rests(path):
+    skeletons = read_usd_skeleton_rests(path)
+    reasons = []
+    for skeleton in skeletons:
+        if skeleton.problem is not None:
+            reasons.append(skeleton.problem)
+            continue
         bones = {name: skeleton.positions[i] for name, i in _named_bones(skeleton.names).items()}
-        if not _missing(bones):
-            return bones
-        found.append((skeleton.path, bones))
-    if len(found) == 1:
-        return found[0][1]  # `_rig` names the missing bones
+        missing = _missing(bones)
+        if not missing or len(skeletons) == 1:
+            return bones  # `_rig` names the missing bones of a file's one skeleton
+        reasons.append(f"{skeleton.path}: no {', '.join(missing)}")
+    if len(skeletons) == 1:
+        raise ExportError(str(path), reasons[0])
     raise ExportError(
         str(path),
-        f"avatar has no humanoid skeleton: none of its {len(found)} skeletons has every bone ("
-        + "; ".join(f"{where}: no {', '.join(_missing(bones))}" for where, bones in found)
-        + ")",
+        f"avatar has no humanoid skeleton: none of its {len(skeletons)} skeletons has every "
+        f"bone ({'; '.join(reasons)})",
     )
 
 

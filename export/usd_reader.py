@@ -57,11 +57,13 @@ def read_usd_joint_positions(
 class SkeletonRest:
     """A UsdSkel Skeleton's rest pose: its prim `path`, the leaf `names` of its joint
     tokens (the last path component, in joint order) and the joints' world `positions`
-    (n_joints, 3) in meters, right-handed, +Y up."""
+    (n_joints, 3) in meters, right-handed, +Y up; or, for a Skeleton that cannot be
+    posed, the `problem` (one line naming it) and no positions (0, 3)."""
 
     path: str
     names: tuple[str, ...]
     positions: np.ndarray
+    problem: str | None = None
 
 
 def read_usd_skeleton_rests(path: str | os.PathLike[str]) -> list[SkeletonRest]:
@@ -71,9 +73,10 @@ def read_usd_skeleton_rests(path: str | os.PathLike[str]) -> list[SkeletonRest]:
     joint hierarchy and placed by the Skeleton prim's own world transform (at the earliest
     time), or, without `restTransforms`, its `bindTransforms` (world space by UsdSkel's
     definition). Positions are converted from the stage's `metersPerUnit` to meters and
-    from a Z-up stage to +Y up (x, y, z -> x, z, -y: a model facing -Y faces +Z). Raises
-    `ExportError` naming the file when it cannot be read, has no Skeleton, or a Skeleton's
-    joints are mis-ordered or have neither transform array for every joint.
+    from a Z-up stage to +Y up (x, y, z -> x, z, -y: a model facing -Y faces +Z). A
+    Skeleton whose joints are mis-ordered or have neither transform array for every
+    joint comes with its `problem`. Raises `ExportError` naming the file when it cannot
+    be read or has no Skeleton.
     """
     stage = _open(path)
     scale = UsdGeom.GetStageMetersPerUnit(stage)
@@ -81,14 +84,13 @@ def read_usd_skeleton_rests(path: str | os.PathLike[str]) -> list[SkeletonRest]:
     rests = []
     for skeleton in _skeletons(stage, path):
         tokens = skeleton.GetJointsAttr().Get() or []
-        world = _world_rest_transforms(skeleton, tokens, str(path))
-        rests.append(
-            SkeletonRest(
-                path=str(skeleton.GetPath()),
-                names=_leaf_names(tokens),
-                positions=scale * world[:, 3, :3] @ to_y_up.T,
-            )
-        )
+        where, names = str(skeleton.GetPath()), _leaf_names(tokens)
+        try:
+            world = _world_rest_transforms(skeleton, tokens, str(path))
+        except ExportError as exc:
+            rests.append(SkeletonRest(where, names, np.zeros((0, 3)), exc.problem))
+            continue
+        rests.append(SkeletonRest(where, names, scale * world[:, 3, :3] @ to_y_up.T))
     return rests
 
 

@@ -305,6 +305,25 @@ def test_usd_avatars_without_a_humanoid_skeleton_are_named(tmp_path: Path) -> No
         assert all(part in raised.value.problem for part in parts), raised.value.problem
 
 
+def test_a_usd_skeleton_that_cannot_be_posed_is_passed_over(tmp_path: Path) -> None:
+    """A prop's Skeleton without rest or bind transforms beside a humanoid one: the
+    humanoid is read; alone with another broken one, both are named."""
+    path = tmp_path / "avatar.usda"
+    _usd_avatar(path, [_turned_skeleton(AVATAR_RIG)], "rest", meters_per_unit=0.01, up="Z")
+    stage = Usd.Stage.Open(str(path))
+    prop = UsdSkel.Skeleton.Define(stage, "/Character/Prop")
+    prop.CreateJointsAttr(Vt.TokenArray(["Sword", "Sword/Blade"]))
+    stage.Save()
+    np.testing.assert_allclose(read_avatar_rig(path).rest, AVATAR_RIG.rest, atol=1e-6)
+    broken = tmp_path / "broken.usda"
+    tokens, positions = _turned_skeleton(AVATAR_RIG)
+    _usd_avatar(broken, [(tokens, positions), (tokens, positions)], "none")
+    with pytest.raises(ExportError) as raised:
+        read_avatar_rig(broken)
+    assert "none of its 2 skeletons has every bone" in raised.value.problem
+    assert "skeleton /Character/Skel1 has no restTransforms" in raised.value.problem
+
+
 def test_usd_suffixes_are_the_usd_writers() -> None:
     assert sorted(USD_SUFFIXES) == sorted(usd_writer.SUFFIXES)
 
