@@ -16,7 +16,8 @@ frame up to `max_gate_px`.
 
 Blobs no label takes are followed from frame to frame as anonymous tracks, each with the
 labels it may belong to: those whose gate held it, and for a blob that appeared from
-nowhere every label lost beyond coasting, passed on from frame to frame (merging tracks
+nowhere every label lost beyond coasting or with no blob in its gate (its prediction
+went astray: a foot kicked while hidden), passed on from frame to frame (merging tracks
 pool them). Each frame:
 
 1. the tracked labels take blobs by the smallest total distance (Hungarian, scipy); a
@@ -232,9 +233,11 @@ class MarkerTracker:
         track_distance = _distances(self._anonymous + self._anonymous_velocity, blobs)
         continues = track_distance <= s.gate_px
         inherited = (continues[:, :, None] & self._owners[:, None, :]).any(axis=0)
-        # a new blob may be any label whose whereabouts are unknown
+        # a new blob may be any label whose whereabouts are unknown: lost beyond coasting,
+        # or with no blob in its gate (its prediction went astray)
         born = ~continues.any(axis=0)
-        owners = in_gate.T | inherited | (born[:, None] & ~coasting[None, :])
+        unknown = ~coasting | ~in_gate.any(axis=1)
+        owners = in_gate.T | inherited | (born[:, None] & unknown[None, :])
         frame = _Frame(distance, in_gate, track_distance, continues, owners)
 
         if not s.guard_swaps:  # the paper's filter: every label takes its nearest blob

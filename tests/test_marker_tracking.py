@@ -100,6 +100,22 @@ def test_a_marker_that_passes_behind_another_is_not_taken_for_it() -> None:
     assert _wrong(tracked, truth) == 0
 
 
+def test_a_blob_of_a_marker_that_jumped_while_hidden_is_not_taken_by_another() -> None:
+    # Both feet hidden a frame; the right foot comes back 11 px from where its label looks
+    # for it (a kick), just where the left foot was, which stays hidden. The left foot's
+    # label must not take it: the right foot's label found nothing in its gate, so the
+    # new blob may be the right foot's.
+    l_foot, r_foot = 6, 7
+    truth = _sway(16)
+    hidden = np.zeros((16, 8), bool)
+    hidden[10:, l_foot] = True
+    hidden[10, r_foot] = True
+    truth[11:, r_foot] = truth[11:, l_foot] + [1.0, 0.0]
+    tracked = MarkerTracker(BASE).track(_blobs(truth, hidden))
+    assert _wrong(tracked, truth) == 0
+    assert np.isnan(tracked[11:, [l_foot, r_foot]]).all()
+
+
 def test_a_marker_is_reacquired_after_an_occlusion() -> None:
     truth = _sway(50)
     hidden = np.zeros((50, 8), bool)
