@@ -33,8 +33,9 @@ projects within `MERGED_FACTOR` times `ambiguity_px` of.
 
 A label is also dropped from a camera's output when its views disagree
 (`_disagreeing`: a tracker that put it on another marker's blob; where the view meets
-none of the label's other views while two of those meet, `outvoted` names it, and the
-stage takes the tracker off that blob), or when a marker lost in that camera, but
+none of the label's other views while two of those meet, or two that meet have both
+been held longer than it, `outvoted` names it, and the stage takes the tracker off that
+blob; the other views then stand if they meet), or when a marker lost in that camera, but
 triangulated from the others or lost for at most `FRESH_FRAMES`, projects within
 `ambiguity_px` of its blob: the blob is probably both markers merged.
 
@@ -165,10 +166,11 @@ class CrossViewLabeller:
         self._body = LegBody.from_markers(initial)
         self._shins = ShinMeter()
         self._pending_legs = np.full((N_MARKERS, 3), np.nan)
+        self._held = np.zeros((len(cameras), N_MARKERS), dtype=np.int64)
         self.outvoted = np.zeros((len(cameras), N_MARKERS), dtype=bool)
         """(c, 8) bool: the labels the last `step` dropped because their view meets none
-        of the marker's other views while two of those meet (`_outvoted`): that
-        camera's tracker follows a wrong blob."""
+        of the marker's other views while two of those meet, or is younger than two
+        that meet (`_outvoted`): that camera's tracker follows a wrong blob."""
 
     def predicted(self, current: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Each label's position (8, 3) meters in this frame and its 3D gate (8,) meters,
@@ -204,6 +206,7 @@ class CrossViewLabeller:
                 "unlabelled", f"must hold one blob array per camera ({c}), got {len(unlabelled)}"
             )
         blobs = [np.asarray(b, dtype=np.float64).reshape(-1, 2) for b in unlabelled]
+        self._held = np.where(np.isnan(labelled).any(axis=-1), 0, self._held + 1)
         current = self._triangulate(labelled).points
         prediction, gate = self.predicted(current)
         hypotheses = _hypotheses(labelled, blobs)
@@ -230,7 +233,10 @@ class CrossViewLabeller:
         self._remember(current, prediction)
         disagreeing = self._disagreeing(labelled)
         self.outvoted = self._outvoted(labelled, disagreeing.any(axis=0))
-        labelled[self._merged(labelled, positions) | disagreeing | self.outvoted] = np.nan
+        if self.outvoted.any():  # the views left may meet now
+            labelled[self.outvoted] = np.nan
+            disagreeing = self._disagreeing(labelled)
+        labelled[self._merged(labelled, positions) | disagreeing] = np.nan
         return labelled, found
 
     def _legs(
@@ -385,7 +391,10 @@ class CrossViewLabeller:
         meets none of the marker's other views (within `RIVAL_ERROR_FACTOR` times
         `epipolar_px`, two views at a time) while two of those others meet: that
         camera's tracker is on a wrong blob. A view that meets one other view is not
-        outvoted, even if two others meet elsewhere (one pair may be a ghost)."""
+        outvoted by geometry alone (one pair may be a ghost), only when two views that
+        meet have both been held for more frames in a row than it: markers at one height
+        make every pair meet, and a label just put on a blob of a marker hiding its own
+        (a subject turning side-on) is the likelier mistake."""
         c = len(self.cameras)
         outvoted = np.zeros((c, N_MARKERS), dtype=bool)
         markers = np.flatnonzero(disagree)
@@ -400,9 +409,15 @@ class CrossViewLabeller:
             close = error <= RIVAL_ERROR_FACTOR * self._tolerance[:, None, None]
         met = np.stack([close[a, p] & close[b, p] for p, (a, b) in enumerate(pairs)])  # (P, m)
         seen = ~np.isnan(labelled[:, markers]).any(axis=-1)
+        held = self._held[:, markers]
         for camera in range(c):
             own = np.array([camera in pair for pair in pairs])
-            outvoted[camera, markers] = seen[camera] & ~met[own].any(axis=0) & met[~own].any(axis=0)
+            older = np.stack(
+                [(held[a] > held[camera]) & (held[b] > held[camera]) for a, b in pairs]
+            )
+            lone = ~met[own].any(axis=0) & met[~own].any(axis=0)
+            younger = (met & older)[~own].any(axis=0)
+            outvoted[camera, markers] = seen[camera] & (lone | younger)
         return outvoted
 
     def _merged(self, labelled: np.ndarray, positions: np.ndarray) -> np.ndarray:

@@ -78,6 +78,17 @@ def test_legs_lost_in_both_cameras_are_found_by_their_shape(markers: np.ndarray)
     assert found == {(c, label) for c in range(2) for label in LEGS}
 
 
+def test_a_leg_blob_near_another_markers_view_is_not_given(markers: np.ndarray) -> None:
+    # the left wrist, labelled in both cameras, 4 cm from the left knee: the knee's blob
+    # may be both merged, so the knee is not labelled; the rest of the legs are
+    moved = _stride(markers, 0.15)
+    moved[2] = moved[4] + [0.04, 0.0, 0.0]
+    out, pixels, found = _find_legs(markers, moved)
+    assert not any(label == 4 for _, label in found)
+    assert found >= {(c, label) for c in range(2) for label in (5, 7)}
+    np.testing.assert_allclose(out[:, [5, 7]], pixels[:, [5, 7]])
+
+
 def test_legs_that_jump_between_frames_are_not_labelled(markers: np.ndarray) -> None:
     # Two frames that each fit, 30 cm apart: a coincidence (a ghost that fits the shins
     # in one frame), not legs that moved.
