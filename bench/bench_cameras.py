@@ -66,7 +66,8 @@ def time_camera(size: tuple[int, int], poses: np.ndarray) -> tuple[np.ndarray, n
         frames = render(poses[offset : offset + RENDER_CHUNK], [camera], options, offset)[0].frames
         for frame in frames:
             begin = time.perf_counter()
-            tracker.step(detect_markers(frame, mask=mask).centroids)
+            blobs = detect_markers(frame, mask=mask)
+            tracker.step(blobs.centroids, blobs.merged())
             middle = time.perf_counter()
             _, binary = cv2.threshold(frame, 40, 255, cv2.THRESH_BINARY)
             cv2.connectedComponentsWithStats(binary, connectivity=8)

@@ -1,8 +1,9 @@
 """The measurement chain end to end on synthetic video: render, detect, track, triangulate.
 
 `run_chain` films a take's poses with the synthetic rig (`samba.marker_render`), finds the
-blobs of every frame (`samba.marker_detection`), keeps the 8 labels per camera
-(`samba.marker_tracking`) and triangulates them by DLT (`samba.triangulation`), as the
+blobs of every frame (`samba.marker_detection`, flagging blobs of two markers merged),
+keeps the 8 labels per camera (`samba.marker_tracking`) and triangulates them by DLT
+(`samba.triangulation`), as the
 camera nodes and the server will. The subject first stands in the standard pose
 (`samba.lead_in`), and each camera's tracker starts from the standard pose of an average
 body of the subject's height at that place and heading. Before the subject steps in,
@@ -25,7 +26,7 @@ from samba.camera import Camera, CameraGroup
 from samba.cross_view_labels import CrossViewSettings
 from samba.frame_io import read_frames, write_video
 from samba.lead_in import LeadIn, standing_lead_in
-from samba.marker_detection import detect_markers, static_mask
+from samba.marker_detection import MERGED_AREA_RATIO, Blobs, detect_markers, static_mask
 from samba.marker_render import RenderOptions, film_empty_stage, render
 from samba.marker_tracking import REFERENCE_FOCAL_PX
 from samba.skeleton import N_MARKERS, markers_of
@@ -46,7 +47,9 @@ class ChainSettings:
     the standing lead-in: `hold_seconds` in the standard pose, then `blend_seconds`
     moving into the take's first pose; the cross-view labelling of lost labels
     (`cross_view`; None: each camera's tracker alone), and whether a stage that lost the
-    subject looks for it in the standard pose (`search`, `StageTracker`)."""
+    subject looks for it in the standard pose (`search`, `StageTracker`); and at how
+    many times the frame's median blob area a blob is taken for two markers merged
+    (`merged_area_ratio`, `Blobs.merged`; None: never)."""
 
     render: RenderOptions = field(default_factory=RenderOptions)
     tracker: dict[str, float] = field(default_factory=dict)
@@ -54,6 +57,7 @@ class ChainSettings:
     blend_seconds: float = 0.5
     cross_view: CrossViewSettings | None = field(default_factory=CrossViewSettings)
     search: bool = True
+    merged_area_ratio: float | None = MERGED_AREA_RATIO
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,25 +127,26 @@ class ChainResult:
 
 def detect_camera(
     camera: Camera, frames: np.ndarray, settings: ChainSettings, seed: int
-) -> list[np.ndarray]:
-    """Blob centroids (m_f, 2) of every frame (F, H, W) of one camera, with the static
-    spots of the empty stage masked."""
+) -> list[Blobs]:
+    """The blobs of every frame (F, H, W) of one camera, with the static spots of the
+    empty stage masked."""
     rng = np.random.default_rng([seed, EMPTY_STAGE_FRAMES])
     mask = static_mask(film_empty_stage(camera, settings.render, EMPTY_STAGE_FRAMES, rng))
     return [
-        detect_markers(frame, mask=mask, name=f"{camera.name} frame {i}").centroids
+        detect_markers(frame, mask=mask, name=f"{camera.name} frame {i}")
         for i, frame in enumerate(frames)
     ]
 
 
 def track_cameras(
     cameras: CameraGroup,
-    centroids: Sequence[Sequence[np.ndarray]],
+    blobs: Sequence[Sequence[Blobs]],
     lead_in: LeadIn,
     settings: ChainSettings,
 ) -> np.ndarray:
-    """Every camera's labelled pixels (c, F, 8, 2) from its blob centroids per frame
-    (`centroids[camera][frame]`, (m, 2) each). Each tracker starts from the standard
+    """Every camera's labelled pixels (c, F, 8, 2) from its blobs per frame
+    (`blobs[camera][frame]`); no label is reported on a blob that looks like two markers
+    merged (`Blobs.merged` at `settings.merged_area_ratio`). Each tracker starts from the standard
     pose where the lead-in stands; with `settings.cross_view`, lost labels are found
     again across the cameras every frame (`CrossViewLabeller`) and handed back to the
     trackers, and with `settings.search` a lost subject is found again (`StageTracker`)."""
@@ -154,10 +159,14 @@ def track_cameras(
         settings.cross_view,
         settings.search,
     )
-    frames = len(centroids[0])
+    frames = len(blobs[0])
     out = np.full((len(cameras), frames, N_MARKERS, 2), np.nan)
     for f in range(frames):
-        out[:, f] = stage.step([c[f] for c in centroids])
+        found = [camera[f] for camera in blobs]
+        out[:, f] = stage.step(
+            [b.centroids for b in found],
+            merged=[b.merged(settings.merged_area_ratio) for b in found],
+        )
     return out
 
 
@@ -178,15 +187,15 @@ def run_chain(
     settings = settings or ChainSettings()
     lead_in = standing_lead_in(poses, fps, settings.hold_seconds, settings.blend_seconds)
     views = render(lead_in.poses, cameras, settings.render, seed)
-    centroids = []
+    blobs = []
     for view in views:
         frames = view.frames
         if video_folder is not None:
             path = Path(video_folder) / f"{view.camera.name}.avi"
             write_video(frames, path, fps)
             frames = read_frames(path)
-        centroids.append(detect_camera(view.camera, frames, settings, seed))
-    tracked = track_cameras(CameraGroup(tuple(cameras)), centroids, lead_in, settings)
+        blobs.append(detect_camera(view.camera, frames, settings, seed))
+    tracked = track_cameras(CameraGroup(tuple(cameras)), blobs, lead_in, settings)
     take = slice(lead_in.frames, None)
     return ChainResult(
         truth=markers_of(lead_in.poses[take]),

@@ -29,7 +29,8 @@ knee) are then labelled both legs at once by their shape (`samba.leg_labels`): a
 unlabelled blobs' pairs (and a lone view paired with a blob), the one assignment whose
 shins keep the subject's length and whose left leg stands left of the right one, found
 again in the next frame (within `LEG_CONFIRM_M`); no blob is given that another marker
-projects within `MERGED_FACTOR` times `ambiguity_px` of.
+projects within `MERGED_FACTOR` times `ambiguity_px` of, unless that marker is a leg
+label placed with it on a blob of its own (knees close in one camera).
 
 A label is also dropped from a camera's output when its views disagree
 (`_disagreeing`: a tracker that put it on another marker's blob; where the view meets
@@ -255,7 +256,8 @@ class CrossViewLabeller:
         before found too (within `LEG_CONFIRM_M`) gives labels. `current` (8, 3) the
         markers triangulated now, `prediction` (8, 3) where the others are predicted
         (`predicted`; trusted for `FRESH_FRAMES`): a label is not given a blob another
-        marker may be merged with (`_near_other`); `settings` those of `assign_legs`."""
+        marker may be merged with (`_near_other`; the labels placed together on blobs of
+        their own do not count); `settings` those of `assign_legs`."""
         pending, self._pending_legs = self._pending_legs, np.full((N_MARKERS, 3), np.nan)
         views = ~np.isnan(labelled).any(axis=-1)  # (c, 8)
         lost = np.isnan(current[LEG_MARKERS]).any(axis=-1) & (views[:, LEG_MARKERS].sum(0) < 2)
@@ -294,14 +296,20 @@ class CrossViewLabeller:
         if not (moved <= LEG_CONFIRM_M).all():
             return []
         projected = self.cameras.project(positions)  # (c, 8, 2)
+        blob_of = np.full((len(self.cameras), N_MARKERS), -1)
+        blob_of[:, placed] = index[:, choice[placed]]  # (c, 8): each placed label's blob
         found = []
         for label in placed:
-            chosen = index[:, choice[label]]
             taken = [
-                (camera, free[camera][blob]) for camera, blob in enumerate(chosen) if blob >= 0
+                (camera, free[camera][blob])
+                for camera, blob in enumerate(blob_of[:, label])
+                if blob >= 0
             ]
+            # a label placed with this one on a blob of its own there is no merge
+            apart = (blob_of >= 0) & (blob_of != blob_of[:, [label]])  # (c, 8)
             if any(
-                self._near_other(projected[camera], label, pixel, camera) for camera, pixel in taken
+                self._near_other(projected[camera], label, pixel, camera, apart[camera])
+                for camera, pixel in taken
             ):
                 continue
             for camera, (u, v) in taken:
@@ -310,12 +318,20 @@ class CrossViewLabeller:
         return found
 
     def _near_other(
-        self, projected: np.ndarray, label: int, pixel: np.ndarray, camera: int
+        self,
+        projected: np.ndarray,
+        label: int,
+        pixel: np.ndarray,
+        camera: int,
+        apart: np.ndarray,
     ) -> bool:
-        """Whether a marker other than `label` projects (`projected` (8, 2) raw pixels of
-        `camera`) within `MERGED_FACTOR` times `ambiguity_px` of the blob at `pixel`
-        (2,): the blob may be both markers merged."""
-        gap = np.linalg.norm(np.delete(projected, label, axis=0) - pixel, axis=-1)
+        """Whether a marker other than `label` and those `apart` (8,) bool (on blobs of
+        their own) projects (`projected` (8, 2) raw pixels of `camera`) within
+        `MERGED_FACTOR` times `ambiguity_px` of the blob at `pixel` (2,): the blob may be
+        both markers merged."""
+        others = ~apart
+        others[label] = False
+        gap = np.linalg.norm(projected[others] - pixel, axis=-1)
         with np.errstate(invalid="ignore"):
             return bool((gap < MERGED_FACTOR * self._ambiguity[camera]).any())
 

@@ -40,6 +40,13 @@ BACKGROUND_SAMPLES = 1024
 """About how many pixels (a strided grid) estimate the background level and noise."""
 MAD_TO_SIGMA = 1.4826
 """Median absolute deviation to standard deviation of a normal distribution."""
+MERGED_AREA_RATIO = 1.5
+"""A blob at least this many times the frame's median blob area is taken for two
+markers merged (`Blobs.merged`). On synthetic takes at 160x120 and 320x240 single
+markers' blobs stay below 1.4 and 1.27 times the median in 99% of cases, while two
+merged markers' blobs reach 1.5 and 1.65 times it in 95%."""
+MERGED_MIN_BLOBS = 3
+"""`Blobs.merged` needs at least this many blobs for a median worth comparing with."""
 
 _DTYPES = (np.uint8, np.uint16, np.float32, np.float64)
 
@@ -61,6 +68,15 @@ class Blobs:
 
     def __len__(self) -> int:
         return len(self.centroids)
+
+    def merged(self, area_ratio: float | None = MERGED_AREA_RATIO) -> np.ndarray:
+        """(m,) bool: the blobs at least `area_ratio` times the median blob area of the
+        frame, probably two markers merged, whose centroid is neither's (None, or fewer
+        than `MERGED_MIN_BLOBS` blobs: none). Markers of one size at about one depth
+        make blobs of about one area."""
+        if area_ratio is None or len(self) < MERGED_MIN_BLOBS:
+            return np.zeros(len(self), dtype=bool)
+        return self.areas >= area_ratio * np.median(self.areas)
 
 
 def grey_frame(frame: np.ndarray, name: str = "frame") -> np.ndarray:

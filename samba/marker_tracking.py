@@ -34,9 +34,12 @@ pool them). Each frame:
 
 "Nearly" is within `ambiguity_px` (plus the prediction slack of a lost label, growing
 like its gate up to `max_slack_px`). Two markers crossing or merging in the image leave
-both labels missing until they are apart again. Output per frame: (8, 2) pixels (OpenCV
-convention), NaN = missing. Distances are pixels for a 160x120 image with a 60-degree
-lens (focal length `REFERENCE_FOCAL_PX`); `TrackerSettings.for_camera` scales them.
+both labels missing until they are apart again. A label on a blob the detector flags
+as two markers merged (`samba.marker_detection.Blobs.merged`: a marker coming out from
+behind another one whose label follows it) keeps following it but is not reported.
+Output per frame: (8, 2) pixels (OpenCV convention), NaN = missing. Distances are pixels
+for a 160x120 image with a 60-degree lens (focal length `REFERENCE_FOCAL_PX`);
+`TrackerSettings.for_camera` scales them.
 """
 
 from __future__ import annotations
@@ -211,12 +214,19 @@ class MarkerTracker:
         self._velocity[label] = 0.0
         self._lost[label] = max(self._lost[label], self.settings.coast_frames + 1)
 
-    def step(self, centroids: np.ndarray) -> np.ndarray:
+    def step(self, centroids: np.ndarray, merged: np.ndarray | None = None) -> np.ndarray:
         """The labels' pixels (8, 2) in this frame from its blob centroids (m, 2), NaN =
-        missing (lost or ambiguous)."""
+        missing (lost or ambiguous). `merged` (m,) bool marks blobs that look like two
+        markers merged (`Blobs.merged`): a label keeps following such a blob, but is
+        not reported on it (its centroid is neither marker's)."""
         blobs = np.asarray(centroids, dtype=np.float64)
         if blobs.ndim != 2 or blobs.shape[1] != 2 or not np.isfinite(blobs).all():
             raise InputError("centroids", f"must be finite (m, 2) pixels, got {blobs.shape}")
+        merged = np.zeros(len(blobs), dtype=bool) if merged is None else np.asarray(merged)
+        if merged.shape != (len(blobs),) or merged.dtype != np.bool_:
+            raise InputError(
+                "merged", f"must be ({len(blobs)},) bool, got {merged.dtype} {merged.shape}"
+            )
         s = self.settings
         predicted = self._position + self._velocity
         active = self._lost <= s.max_lost_frames
@@ -269,8 +279,9 @@ class MarkerTracker:
         assigned[labels] = True
         self._update_labels(predicted, blobs, labels, chosen)
         self._update_anonymous(blobs, chosen, frame, assigned)
+        single = ~merged[chosen]
         out = np.full((N_MARKERS, 2), np.nan)
-        out[labels] = blobs[chosen]
+        out[labels[single]] = blobs[chosen[single]]
         return out
 
     def track(self, frames_centroids: Sequence[np.ndarray]) -> np.ndarray:

@@ -144,11 +144,16 @@ class StageTracker:
         return cls(cameras, trackers, None, cross_view)
 
     def step(
-        self, centroids: Sequence[np.ndarray | None], known: np.ndarray | None = None
+        self,
+        centroids: Sequence[np.ndarray | None],
+        known: np.ndarray | None = None,
+        merged: Sequence[np.ndarray | None] | None = None,
     ) -> np.ndarray:
         """The labels (c, 8, 2) raw pixels of this frame, NaN = missing, from each
         camera's blob centroids (m, 2) raw pixels (None: no frame from that camera) and
-        the labels `known` (c, 8, 2) already (NaN: not known), each one of the blobs."""
+        the labels `known` (c, 8, 2) already (NaN: not known), each one of the blobs;
+        `merged` per camera (m,) bool (or None) the blobs that look like two markers
+        merged, on which no label is reported (`MarkerTracker.step`)."""
         if len(centroids) != len(self.cameras):
             raise InputError(
                 "centroids",
@@ -161,7 +166,7 @@ class StageTracker:
             if blobs is None:
                 unlabelled.append(np.zeros((0, 2)))
                 continue
-            labelled[camera] = tracker.step(blobs)
+            labelled[camera] = tracker.step(blobs, None if merged is None else merged[camera])
             if known is not None:
                 labelled[camera] = _put_on(tracker, labelled[camera], known[camera])
             unlabelled.append(tracker.anonymous_blobs)

@@ -121,7 +121,8 @@ class CameraNode:
     `camera` is the calibrated camera the frames come from (its image size is checked);
     `start` where the subject stands when capture begins; `mask` bool (H, W), True =
     static bright pixels to ignore, or None; `threshold` a fixed intensity or "auto"
-    (see `samba.marker_detection.detect_markers`).
+    (see `samba.marker_detection.detect_markers`). No label is sent on a blob that looks
+    like two markers merged (`Blobs.merged`).
     """
 
     def __init__(
@@ -163,7 +164,7 @@ class CameraNode:
                 name, f"frame is {got} but camera {self.camera.name!r} is {width}x{height}"
             )
         blobs = detect_markers(frame, threshold=self.threshold, mask=self.mask, name=name)
-        return self._tracker.step(blobs.centroids)
+        return self._tracker.step(blobs.centroids, blobs.merged())
 
     def unlabelled(self) -> np.ndarray:
         """The blobs (n, 2) pixels of the last frame no label took, the first `MAX_BLOBS`."""

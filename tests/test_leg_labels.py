@@ -78,6 +78,14 @@ def test_legs_lost_in_both_cameras_are_found_by_their_shape(markers: np.ndarray)
     assert found == {(c, label) for c in range(2) for label in LEGS}
 
 
+def test_knees_close_in_one_camera_are_found_on_their_own_blobs(markers: np.ndarray) -> None:
+    # the knees 11.6 px (2.9 reference pixels) apart in camera 0: near enough to merge
+    # as they cross, but two blobs now, each given to one knee of the same assignment
+    out, pixels, found = _find_legs(markers, _stride(markers, 0.1, apart_m=0.0))
+    np.testing.assert_allclose(out[:, LEGS], pixels[:, LEGS])
+    assert found == {(c, label) for c in range(2) for label in LEGS}
+
+
 def test_a_leg_blob_near_another_markers_view_is_not_given(markers: np.ndarray) -> None:
     # the left wrist, labelled in both cameras, 4 cm from the left knee: the knee's blob
     # may be both merged, so the knee is not labelled; the rest of the legs are

@@ -78,6 +78,21 @@ def test_fixed_threshold_and_blob_fields() -> None:
     assert blobs.areas[order][0] < blobs.areas[order][1]
 
 
+def test_a_blob_of_two_markers_merged_is_flagged_by_its_area() -> None:
+    frame = np.zeros((120, 160), np.uint8)
+    for u in (20, 50, 80, 110):
+        cv2.circle(frame, (u, 30), 2, 255, -1)  # single markers
+    cv2.circle(frame, (60, 80), 2, 255, -1)
+    cv2.circle(frame, (63, 80), 2, 255, -1)  # two markers 3 px apart: one blob
+    blobs = detect_markers(frame, threshold=128)
+    assert len(blobs) == 5
+    merged = blobs.merged()
+    assert merged.sum() == 1 and np.allclose(blobs.centroids[merged], [[61.5, 80]])
+    assert not blobs.merged(None).any()
+    few = detect_markers(frame[60:100], threshold=128)  # the merged blob alone
+    assert len(few) == 1 and not few.merged().any()
+
+
 def test_area_and_shape_filters() -> None:
     frame = np.zeros((120, 160), np.uint8)
     cv2.circle(frame, (30, 30), 2, 255, -1)  # a marker
