@@ -17,7 +17,10 @@ when one explanation fits and no other comes near:
   `rival_margin_m`. A label lost for more than `FRESH_FRAMES` has no trusted prediction:
   a hypothesis fits when its point lies within the label's range from its `FOLLOWS`
   neighbour (`SHORTEST_SPAN` of the standing distance up to it plus `span_slack_m`), and
-  comes near within `rival_margin_m` more.
+  comes near within `rival_margin_m` more. For a label triangulated in the frame before,
+  a new blob whose tracker knows how it moved must also have moved as the label did,
+  projected (within `motion_px`): a marker hidden behind another one projects onto that
+  one's blob while the two move apart.
 * a fitting hypothesis stands when every hypothesis of the same label that comes near
   puts the same blob in each of its new cameras, no hypothesis of another label that
   comes near uses any of its blobs, and no other label lost in its new cameras projects
@@ -93,8 +96,10 @@ class CrossViewSettings:
     pixels, scaled per camera; 1.0 before the legs' labelling, whose labels then kept a
     blob of two feet merged at 160x120); the 3D gate `gate_m`, growing by `gate_growth_m` per
     frame a label is lost up to `max_gate_m`; `rival_margin_m` how much farther than the
-    gate a rival hypothesis still counts; `legs` the tolerances of labelling both legs'
-    lost markers at once by their shape (`samba.leg_labels`; None: not done)."""
+    gate a rival hypothesis still counts; `motion_px` how far (reference pixels) a
+    blob's move since the frame before may differ from the label's, projected, for the
+    blob to be that label's (None: not checked); `legs` the tolerances of labelling both
+    legs' lost markers at once by their shape (`samba.leg_labels`; None: not done)."""
 
     epipolar_px: float = 1.0
     ambiguity_px: float = 1.5
@@ -104,6 +109,7 @@ class CrossViewSettings:
     rival_margin_m: float = 0.10
     reach_m: float = 1.0
     span_slack_m: float = 0.05
+    motion_px: float | None = 0.5
     legs: LegSettings | None = field(default_factory=LegSettings)
 
 
@@ -156,8 +162,9 @@ class CrossViewLabeller:
         self.cameras = cameras
         self.settings = settings or CrossViewSettings()
         focal = np.array([camera.matrix[0, 0] for camera in cameras])
-        self._tolerance = self.settings.epipolar_px * focal / REFERENCE_FOCAL_PX  # (c,)
-        self._ambiguity = self.settings.ambiguity_px * focal / REFERENCE_FOCAL_PX
+        self._scale = focal / REFERENCE_FOCAL_PX  # (c,) pixels per reference pixel
+        self._tolerance = self.settings.epipolar_px * self._scale
+        self._ambiguity = self.settings.ambiguity_px * self._scale
         self._last = initial
         standing = np.linalg.norm(initial - initial[list(FOLLOWS)], axis=-1)
         self._span = np.stack(
@@ -187,14 +194,19 @@ class CrossViewLabeller:
         return now, gate
 
     def step(
-        self, labelled: np.ndarray, unlabelled: Sequence[np.ndarray]
+        self,
+        labelled: np.ndarray,
+        unlabelled: Sequence[np.ndarray],
+        motion: Sequence[np.ndarray] | None = None,
     ) -> tuple[np.ndarray, list[Reacquisition]]:
         """Lost labels found again in this frame.
 
         `labelled` (c, 8, 2) raw pixels of each camera's tracked labels, NaN = lost;
         `unlabelled` per camera the (k_c, 2) raw pixels of blobs its tracker left without a
-        label. Returns the labels with the ones found filled in (c, 8, 2), and what was
-        found (to hand back to the trackers with `MarkerTracker.reacquire`).
+        label; `motion` per camera how far each of those blobs moved since the frame
+        before (k_c, 2) pixels, NaN where not known (`MarkerTracker.anonymous_motion`).
+        Returns the labels with the ones found filled in (c, 8, 2), and what was found
+        (to hand back to the trackers with `MarkerTracker.reacquire`).
         """
         c = len(self.cameras)
         labelled = np.array(labelled, dtype=np.float64)
@@ -207,6 +219,12 @@ class CrossViewLabeller:
                 "unlabelled", f"must hold one blob array per camera ({c}), got {len(unlabelled)}"
             )
         blobs = [np.asarray(b, dtype=np.float64).reshape(-1, 2) for b in unlabelled]
+        moves = [
+            np.asarray(m, dtype=np.float64).reshape(-1, 2)
+            for m in (motion if motion is not None else [np.full_like(b, np.nan) for b in blobs])
+        ]
+        if [len(m) for m in moves] != [len(b) for b in blobs]:
+            raise InputError("motion", "must hold one (k, 2) array per camera, like unlabelled")
         self._held = np.where(np.isnan(labelled).any(axis=-1), 0, self._held + 1)
         current = self._triangulate(labelled).points
         prediction, gate = self.predicted(current)
@@ -214,6 +232,7 @@ class CrossViewLabeller:
         found: list[Reacquisition] = []
         if len(hypotheses.label):
             fits, near = self._judge(hypotheses, current, prediction, gate)
+            fits &= self._moving_along(hypotheses, moves, current)
             fits &= self._clear_of_others(hypotheses, labelled, prediction)
             for h in np.flatnonzero(_standing(hypotheses, fits, near)):
                 label = int(hypotheses.label[h])
@@ -373,6 +392,31 @@ class CrossViewLabeller:
                 stale, near_body, off <= np.maximum(reach, limit + margin)
             )
         return fits, near
+
+    def _moving_along(
+        self, hypotheses: _Hypotheses, moves: list[np.ndarray], current: np.ndarray
+    ) -> np.ndarray:
+        """Which hypotheses (h,) of labels triangulated in the frame before have each new
+        blob moving as the label does, projected into that camera (within `motion_px`;
+        blobs whose move is not known pass): a marker hidden behind another one projects
+        onto that one's blob, but the two move apart. The label's move is from where it
+        was to where its other views put it now (`current` (8, 3)), else the
+        hypothesis's point."""
+        h = len(hypotheses.label)
+        if self.settings.motion_px is None:
+            return np.ones(h, dtype=bool)
+        label = hypotheses.label
+        moved = np.full((len(self.cameras), h, 2), np.nan)
+        for camera, blob in enumerate(hypotheses.blob):
+            new = blob >= 0
+            moved[camera, new] = moves[camera][blob[new]]
+        points = self._triangulate(hypotheses.pixels).points
+        points = np.where(np.isnan(current[label]), points, current[label])
+        expected = self.cameras.project(points) - self.cameras.project(self._last[label])
+        limit = self.settings.motion_px * self._scale
+        with np.errstate(invalid="ignore"):
+            off = np.linalg.norm(moved - expected, axis=-1) > limit[:, None]  # (c, h)
+        return ~(off.any(axis=0) & (self._lost[label] == 0))
 
     def _clear_of_others(
         self, hypotheses: _Hypotheses, labelled: np.ndarray, positions: np.ndarray

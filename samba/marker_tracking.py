@@ -155,6 +155,7 @@ class MarkerTracker:
         self._first = True
         self._anonymous = np.zeros((0, 2))
         self._anonymous_velocity = np.zeros((0, 2))
+        self._anonymous_moving = np.zeros(0, dtype=bool)
         self._owners = np.zeros((0, N_MARKERS), dtype=bool)
 
     @classmethod
@@ -186,6 +187,12 @@ class MarkerTracker:
         """The blobs (a, 2) pixels of the last frame that no label took."""
         return self._anonymous.copy()
 
+    @property
+    def anonymous_motion(self) -> np.ndarray:
+        """How far each of `anonymous_blobs` moved since the frame before (a, 2)
+        pixels, NaN for a blob that continues no anonymous track."""
+        return np.where(self._anonymous_moving[:, None], self._anonymous_velocity, np.nan)
+
     def reacquire(self, label: int, pixel: Sequence[float]) -> None:
         """Put `label` (marker index) on `pixel` (u, v) of the last frame, found by other
         means (another camera's view): one of `anonymous_blobs`, whose track (and
@@ -200,6 +207,7 @@ class MarkerTracker:
             self._anonymous[~same],
             self._anonymous_velocity[~same],
         )
+        self._anonymous_moving = self._anonymous_moving[~same]
         self._owners = self._owners[~same]
         self._owners[:, label] = False
         self._position[label] = self._last_seen[label] = pixel
@@ -321,12 +329,14 @@ class MarkerTracker:
         unclaimed = np.ones(len(blobs), dtype=bool)
         unclaimed[chosen] = False
         velocity = np.zeros_like(blobs)
+        continues = np.zeros(len(blobs), dtype=bool)
         if len(self._anonymous) and len(blobs):
             nearest = frame.track_distance.argmin(axis=0)
             continues = frame.continues[nearest, np.arange(len(blobs))]
             velocity[continues] = blobs[continues] - self._anonymous[nearest[continues]]
         self._anonymous = blobs[unclaimed]
         self._anonymous_velocity = velocity[unclaimed]
+        self._anonymous_moving = continues[unclaimed]
         self._owners = frame.owners[unclaimed] & ~assigned
 
 

@@ -2,7 +2,8 @@
 
 `StageTracker` steps one `samba.marker_tracking.MarkerTracker` per camera on that
 camera's blobs and then, unless cross-view labelling is off, the
-`samba.cross_view_labels.CrossViewLabeller`, handing the labels it finds back to the
+`samba.cross_view_labels.CrossViewLabeller` on the blobs the trackers left unlabelled
+(with how they moved), handing the labels it finds back to the
 trackers and taking a tracker off a blob where two other cameras see that label
 elsewhere (`MarkerTracker.release`): a tracker that followed a marker's blob after its
 own marker was hidden would otherwise keep the wrong label once those views are lost.
@@ -161,15 +162,17 @@ class StageTracker:
                 f"got {len(centroids)}",
             )
         labelled = np.full((len(self.cameras), N_MARKERS, 2), np.nan)
-        unlabelled = []
+        unlabelled, motion = [], []
         for camera, (tracker, blobs) in enumerate(zip(self.trackers, centroids, strict=True)):
             if blobs is None:
                 unlabelled.append(np.zeros((0, 2)))
+                motion.append(np.zeros((0, 2)))
                 continue
             labelled[camera] = tracker.step(blobs, None if merged is None else merged[camera])
             if known is not None:
                 labelled[camera] = _put_on(tracker, labelled[camera], known[camera])
             unlabelled.append(tracker.anonymous_blobs)
+            motion.append(tracker.anonymous_motion)
         if self._cross_view is None:
             return labelled
         if self._labeller is None:
@@ -178,7 +181,7 @@ class StageTracker:
                 return labelled
             self._start_labeller(points)
         assert self._labeller is not None
-        labelled, found = self._labeller.step(labelled, unlabelled)
+        labelled, found = self._labeller.step(labelled, unlabelled, motion)
         for event in found:
             self.trackers[event.camera].reacquire(event.label, event.pixel)
         for camera, label in zip(*np.nonzero(self._labeller.outvoted), strict=True):

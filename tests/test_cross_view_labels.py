@@ -54,6 +54,23 @@ def test_a_label_lost_in_one_camera_is_found_from_the_others(markers: np.ndarray
     assert found == [Reacquisition(1, L_WRIST, tuple(pixels[1, L_WRIST]))]
 
 
+def test_a_blob_moving_unlike_the_label_is_not_taken(markers: np.ndarray) -> None:
+    # camera 1's blob lies where the left wrist projects, but it moved 3 px (0.75
+    # reference pixels) since the frame before while the wrist stood still: another
+    # marker's blob that the wrist hides behind
+    cameras = _group(markers, 2)
+    pixels = cameras.project(markers)
+    labelled = pixels.copy()
+    labelled[1, L_WRIST] = np.nan
+    blobs = _unlabelled(pixels, {1: [L_WRIST]})
+    for move, taken in (([3.0, 0.0], False), ([1.0, 0.5], True), ([np.nan, np.nan], True)):
+        labeller = CrossViewLabeller(cameras, markers)
+        motion = [np.zeros((0, 2)), np.array([move])]
+        out, found = labeller.step(labelled, blobs, motion)
+        assert (found == [Reacquisition(1, L_WRIST, tuple(pixels[1, L_WRIST]))]) == taken
+        assert np.isnan(out[1, L_WRIST]).all() != taken
+
+
 def test_a_label_lost_everywhere_is_found_near_its_prediction(markers: np.ndarray) -> None:
     cameras = _group(markers, 3)
     labeller = CrossViewLabeller(cameras, markers)
@@ -235,6 +252,8 @@ def test_bad_input_names_the_argument(markers: np.ndarray) -> None:
         labeller.step(np.zeros((3, 8, 2)), [np.zeros((0, 2))] * 3)
     with pytest.raises(InputError, match="unlabelled"):
         labeller.step(np.zeros((2, 8, 2)), [np.zeros((0, 2))])
+    with pytest.raises(InputError, match="motion"):
+        labeller.step(np.zeros((2, 8, 2)), [np.zeros((1, 2))] * 2, [np.zeros((0, 2))] * 2)
 
 
 def test_cross_view_labelling_recovers_markers_without_swaps() -> None:

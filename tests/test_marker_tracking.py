@@ -140,6 +140,20 @@ def test_a_label_on_a_blob_of_two_merged_markers_is_not_reported() -> None:
         assert np.isnan(tracked[13, L_KNEE]).all() == flag
 
 
+def test_unlabelled_blobs_come_with_their_motion() -> None:
+    # the left wrist's label is abandoned; its blob, unlabelled, moves 1 px a frame
+    start = BASE.copy()
+    start[L_WRIST] = np.nan
+    tracker = MarkerTracker(start)
+    frames = [BASE + [[f, 0.0]] * np.eye(8)[L_WRIST][:, None] for f in range(3)]
+    tracker.step(frames[0])
+    np.testing.assert_array_equal(tracker.anonymous_blobs, frames[0][[L_WRIST]])
+    assert np.isnan(tracker.anonymous_motion).all()  # a new track: its motion unknown
+    for frame in frames[1:]:
+        tracker.step(frame)
+        np.testing.assert_allclose(tracker.anonymous_motion, [[1.0, 0.0]])
+
+
 def test_a_marker_is_reacquired_after_an_occlusion() -> None:
     truth = _sway(50)
     hidden = np.zeros((50, 8), bool)
