@@ -48,7 +48,9 @@ the body (as the tracker's searching labels are) while that neighbour is triangu
 its gate is `gate_m`, growing by `gate_growth_m` per frame lost up to `max_gate_m`. The
 labeller starts from the markers of the standard pose, where the subject stands when
 capture starts. Pixels are each camera's raw (distorted) pixels; tolerances are pixels
-of a 160-pixel-wide, 60-degree camera (`REFERENCE_FOCAL_PX`), scaled per camera.
+of a 160-pixel-wide, 60-degree camera (`REFERENCE_FOCAL_PX`), scaled per camera; those
+between markers (`ambiguity_px`, `motion_px`) also shrink for a subject starting farther
+than `REFERENCE_DISTANCE_M` from the camera (`pixel_scale`).
 """
 
 from __future__ import annotations
@@ -62,7 +64,7 @@ import numpy as np
 from samba.camera import CameraGroup
 from samba.errors import InputError
 from samba.leg_labels import KNOWN, LEG_MARKERS, LegBody, LegSettings, ShinMeter, assign_legs
-from samba.marker_tracking import FOLLOWS, REFERENCE_FOCAL_PX
+from samba.marker_tracking import FOLLOWS, REFERENCE_FOCAL_PX, pixel_scale, subject_distance
 from samba.skeleton import N_MARKERS
 from samba.triangulation import Triangulation
 
@@ -162,8 +164,9 @@ class CrossViewLabeller:
         self.cameras = cameras
         self.settings = settings or CrossViewSettings()
         focal = np.array([camera.matrix[0, 0] for camera in cameras])
-        self._scale = focal / REFERENCE_FOCAL_PX  # (c,) pixels per reference pixel
-        self._tolerance = self.settings.epipolar_px * self._scale
+        self._tolerance = self.settings.epipolar_px * focal / REFERENCE_FOCAL_PX  # (c,)
+        # distances between markers shrink with the subject's distance (`pixel_scale`)
+        self._scale = np.array([pixel_scale(c, subject_distance(c, initial)) for c in cameras])
         self._ambiguity = self.settings.ambiguity_px * self._scale
         self._last = initial
         standing = np.linalg.norm(initial - initial[list(FOLLOWS)], axis=-1)
@@ -257,6 +260,7 @@ class CrossViewLabeller:
             labelled[self.outvoted] = np.nan
             disagreeing = self._disagreeing(labelled)
         labelled[self._merged(labelled, positions) | disagreeing] = np.nan
+        self._held[np.isnan(labelled).any(axis=-1)] = 0  # a view dropped starts again
         return labelled, found
 
     def _legs(
@@ -452,7 +456,9 @@ class CrossViewLabeller:
         `epipolar_px`, two views at a time) while two of those others meet: that
         camera's tracker is on a wrong blob. A view that meets one other view is not
         outvoted by geometry alone (one pair may be a ghost), only when two views that
-        meet have both been held for more frames in a row than it: markers at one height
+        meet have both been given out for more frames in a row than it (a view dropped
+        starts counting again: a tracker that jumped to another marker's blob keeps its
+        label, but its view disagrees then): markers at one height
         make every pair meet, and a label just put on a blob of a marker hiding its own
         (a subject turning side-on) is the likelier mistake."""
         c = len(self.cameras)

@@ -57,6 +57,28 @@ from samba.skeleton import MARKER_NAMES, N_MARKERS, markers_of, standing_pose
 
 REFERENCE_FOCAL_PX = 80.0 / np.tan(np.radians(30.0))
 """Focal length (px) of a 160-pixel-wide image with a 60-degree lens: the settings' scale."""
+REFERENCE_DISTANCE_M = 6.0
+"""How far from the camera (m) the reference pixels assume the subject at most: one
+farther away looks smaller, and the distances shrink with it (`pixel_scale`). At 4 m,
+the held-out and synthetic takes lost fewer markers still, but a martial-arts take's
+kick put a knee's label on the foot's blob (one frame, two rows of four)."""
+
+
+def pixel_scale(camera: Camera, distance_m: float | None = None) -> float:
+    """Pixels of `camera` per reference pixel: its focal length over
+    `REFERENCE_FOCAL_PX`, times `REFERENCE_DISTANCE_M` over the subject's `distance_m`
+    from the camera when that is farther (None: not known), and at least 1 (a marker's
+    blob is a few pixels wide whatever the distance)."""
+    scale = float(camera.matrix[0, 0]) / REFERENCE_FOCAL_PX
+    if distance_m is not None and distance_m > REFERENCE_DISTANCE_M:
+        scale *= REFERENCE_DISTANCE_M / distance_m
+    return max(scale, 1.0)
+
+
+def subject_distance(camera: Camera, markers: np.ndarray) -> float:
+    """How far (m) the mean of a subject's `markers` (n, 3) meters is from `camera`."""
+    return float(np.linalg.norm(np.mean(markers, axis=0) - camera.center))
+
 
 FOLLOWS: tuple[int, ...] = (1, 0, 0, 1, 0, 1, 4, 5)
 """The marker a searching marker moves with (marker order): the shoulders each other,
@@ -112,13 +134,15 @@ class TrackerSettings:
         return replace(self, **{name: getattr(self, name) * factor for name in self._DISTANCES})
 
     @classmethod
-    def for_camera(cls, camera: Camera, **overrides: float) -> TrackerSettings:
+    def for_camera(
+        cls, camera: Camera, distance_m: float | None = None, **overrides: float
+    ) -> TrackerSettings:
         """The defaults (with `overrides`, distances in reference pixels) scaled to
-        `camera`'s focal length relative to `REFERENCE_FOCAL_PX`."""
+        `camera` by `pixel_scale`, for a subject `distance_m` from it (None: not known)."""
         unknown = set(overrides) - {f.name for f in fields(cls)}
         if unknown:
             raise ValueError(f"unknown tracker settings: {', '.join(sorted(unknown))}")
-        return cls(**overrides).scaled(float(camera.matrix[0, 0]) / REFERENCE_FOCAL_PX)
+        return cls(**overrides).scaled(pixel_scale(camera, distance_m))
 
 
 @dataclass(frozen=True, eq=False)
@@ -171,11 +195,14 @@ class MarkerTracker:
 
         The pose stands on the floor with its hip midpoint at `position` (x, z) meters,
         facing +Z turned by `heading_deg` about +Y (towards +X). Markers outside the image
-        start abandoned. `settings` default to `TrackerSettings.for_camera(camera)`.
+        start abandoned. `settings` default to `TrackerSettings.for_camera` for the
+        subject's distance there (`subject_distance`).
         """
-        pixels = camera.project(markers_of(standing_pose(position, heading_deg, height)))
+        markers = markers_of(standing_pose(position, heading_deg, height))
+        pixels = camera.project(markers)
         pixels[~camera.in_image(pixels)] = np.nan
-        return cls(pixels, settings or TrackerSettings.for_camera(camera))
+        distance = subject_distance(camera, markers)
+        return cls(pixels, settings or TrackerSettings.for_camera(camera, distance))
 
     @property
     def lost_frames(self) -> np.ndarray:

@@ -44,7 +44,7 @@ import numpy as np
 from samba.camera import CameraGroup
 from samba.cross_view_labels import CrossViewLabeller, CrossViewSettings
 from samba.errors import InputError
-from samba.marker_tracking import MarkerTracker, TrackerSettings
+from samba.marker_tracking import MarkerTracker, TrackerSettings, subject_distance
 from samba.skeleton import N_MARKERS, markers_of, standing_pose
 from samba.standard_pose_search import SHOULDERS, StandardPoseSearch, heading_of
 from samba.triangulation import triangulate_cameras
@@ -114,13 +114,18 @@ class StageTracker:
         pixels (`TrackerSettings.for_camera`); `cross_view` and `search` as for the
         constructor."""
         where = (position, heading_deg, height)
+        markers = markers_of(standing_pose(*where))
         trackers = [
             MarkerTracker.from_standard_pose(
-                camera, *where, TrackerSettings.for_camera(camera, **(tracker or {}))
+                camera,
+                *where,
+                TrackerSettings.for_camera(
+                    camera, subject_distance(camera, markers), **(tracker or {})
+                ),
             )
             for camera in cameras
         ]
-        return cls(cameras, trackers, markers_of(standing_pose(*where)), cross_view, search)
+        return cls(cameras, trackers, markers, cross_view, search)
 
     @classmethod
     def from_labels(

@@ -8,9 +8,11 @@ import pytest
 from samba.camera import Camera
 from samba.errors import InputError
 from samba.marker_tracking import (
+    REFERENCE_DISTANCE_M,
     REFERENCE_FOCAL_PX,
     MarkerTracker,
     TrackerSettings,
+    pixel_scale,
 )
 from samba.skeleton import markers_of, standard_pose
 
@@ -236,6 +238,21 @@ def test_settings_scale_with_the_focal_length() -> None:
     assert settings.coast_frames == TrackerSettings().coast_frames
     with pytest.raises(ValueError, match="unknown tracker settings: gate"):
         TrackerSettings.for_camera(camera, gate=3.0)
+
+
+def test_settings_shrink_for_a_subject_far_away() -> None:
+    # 640 px wide: 4 pixels per reference pixel for a subject within 6 m; one 24 m away
+    # looks four times smaller, as at 160x120 from 6 m, and 48 m away no smaller than that
+    camera = Camera.look_at("hd", (0, 1.5, 4), (0, 1, 0), (640, 480), 60.0)
+    assert REFERENCE_DISTANCE_M == 6.0
+    assert pixel_scale(camera) == pytest.approx(4.0)
+    assert pixel_scale(camera, 6.0) == pytest.approx(4.0)
+    assert pixel_scale(camera, 24.0) == pytest.approx(1.0)
+    assert pixel_scale(camera, 48.0) == pytest.approx(1.0)
+    far = TrackerSettings.for_camera(camera, 12.0)
+    assert far.gate_px == pytest.approx(2 * TrackerSettings().gate_px)
+    tracker = MarkerTracker.from_standard_pose(camera, (0.0, -8.0))  # about 12 m away
+    assert tracker.settings.gate_px == pytest.approx(far.gate_px, rel=0.01)
 
 
 def test_bad_inputs_raise_input_errors() -> None:
