@@ -234,8 +234,9 @@ class CrossViewLabeller:
         hypotheses = _hypotheses(labelled, blobs)
         found: list[Reacquisition] = []
         if len(hypotheses.label):
-            fits, near = self._judge(hypotheses, current, prediction, gate)
-            fits &= self._moving_along(hypotheses, moves, current)
+            views = self._triangulate(hypotheses.pixels)
+            fits, near = self._judge(hypotheses, views, current, prediction, gate)
+            fits &= self._moving_along(hypotheses, views.points, moves, current)
             fits &= self._clear_of_others(hypotheses, labelled, prediction)
             for h in np.flatnonzero(_standing(hypotheses, fits, near)):
                 label = int(hypotheses.label[h])
@@ -368,13 +369,14 @@ class CrossViewLabeller:
     def _judge(
         self,
         hypotheses: _Hypotheses,
+        result: Triangulation,
         current: np.ndarray,
         prediction: np.ndarray,
         gate: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Which hypotheses (h,) fit, and which come near (both bool)."""
+        """Which hypotheses (h,) fit, and which come near (both bool), given their
+        triangulation `result`."""
         label, margin = hypotheses.label, self.settings.rival_margin_m
-        result = self._triangulate(hypotheses.pixels)
         ratio = np.nanmax(result.view_error / self._tolerance[:, None], axis=0)  # (h,)
         off = np.linalg.norm(result.points - prediction[label], axis=-1)
         limit = gate[label]
@@ -398,14 +400,18 @@ class CrossViewLabeller:
         return fits, near
 
     def _moving_along(
-        self, hypotheses: _Hypotheses, moves: list[np.ndarray], current: np.ndarray
+        self,
+        hypotheses: _Hypotheses,
+        points: np.ndarray,
+        moves: list[np.ndarray],
+        current: np.ndarray,
     ) -> np.ndarray:
         """Which hypotheses (h,) of labels triangulated in the frame before have each new
         blob moving as the label does, projected into that camera (within `motion_px`;
         blobs whose move is not known pass): a marker hidden behind another one projects
         onto that one's blob, but the two move apart. The label's move is from where it
         was to where its other views put it now (`current` (8, 3)), else the
-        hypothesis's point."""
+        hypothesis's point (`points` (h, 3))."""
         h = len(hypotheses.label)
         if self.settings.motion_px is None:
             return np.ones(h, dtype=bool)
@@ -414,7 +420,6 @@ class CrossViewLabeller:
         for camera, blob in enumerate(hypotheses.blob):
             new = blob >= 0
             moved[camera, new] = moves[camera][blob[new]]
-        points = self._triangulate(hypotheses.pixels).points
         points = np.where(np.isnan(current[label]), points, current[label])
         expected = self.cameras.project(points) - self.cameras.project(self._last[label])
         limit = self.settings.motion_px * self._scale
@@ -458,9 +463,9 @@ class CrossViewLabeller:
         outvoted by geometry alone (one pair may be a ghost), only when two views that
         meet have both been given out for more frames in a row than it (a view dropped
         starts counting again: a tracker that jumped to another marker's blob keeps its
-        label, but its view disagrees then): markers at one height
-        make every pair meet, and a label just put on a blob of a marker hiding its own
-        (a subject turning side-on) is the likelier mistake."""
+        label, but its view disagrees then): markers at one height make every pair
+        meet, and a label just put on a blob of a marker hiding its own (a subject
+        turning side-on) is the likelier mistake."""
         c = len(self.cameras)
         outvoted = np.zeros((c, N_MARKERS), dtype=bool)
         markers = np.flatnonzero(disagree)
