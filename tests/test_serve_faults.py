@@ -88,7 +88,10 @@ def test_loss_duplication_reordering_and_jitter(
     lost = {decode(data).sequence for data in proxy.lost}
     both = n - len(lost)  # frames whose two packets both got through
     assert sync["partial"] == 0 and sync["skipped"] > 0, sync
-    assert sync["complete"] + sync["skipped"] <= n
+    # a capture frame resolves once, but for the first half second, while the clock
+    # offsets settle, a jittered packet may go to a frame of its own (`service.frame_sync`;
+    # on a busy machine 4 of 300 frames did)
+    assert sync["complete"] + sync["skipped"] <= n + round(0.5 * long_capture.take.fps), sync
     # all of them unless the busy machine delayed a packet past wait_ms on top of the jitter
     assert sync["complete"] >= 0.9 * both, (sync, both)
     assert 2 * sync["complete"] + sync["skipped"] + accounted <= sync["packets"]
