@@ -69,7 +69,10 @@ class StageTracker:
     are when capture starts, or None to start the cross-view labelling at the first
     frame whose markers all triangulate; `cross_view` its settings (None: each camera's
     tracker alone); `search` whether a stage that lost the subject looks for it in the
-    standard pose (with the cross-view labelling only).
+    standard pose (with the cross-view labelling only); `refit` tracker overrides in
+    reference pixels, or None: given, every time the cross-view labelling starts the
+    trackers' settings are made again for the subject's distance from each camera
+    (`TrackerSettings.for_camera`), for trackers started before it was known.
     Call `step` once per frame, in order.
     """
 
@@ -80,6 +83,7 @@ class StageTracker:
         initial: np.ndarray | None = None,
         cross_view: CrossViewSettings | None = None,
         search: bool = True,
+        refit: Mapping[str, float] | None = None,
     ) -> None:
         if len(trackers) != len(cameras):
             raise InputError(
@@ -90,6 +94,7 @@ class StageTracker:
         self._cross_view = cross_view
         self._labeller = None
         self._searches = search
+        self._refit = refit
         self._search: StandardPoseSearch | None = None
         self._finds: list[float] = []
         self.searches = 0
@@ -137,7 +142,8 @@ class StageTracker:
     ) -> StageTracker:
         """Every camera's labels started where `labels` (c, 8, 2) raw pixels put them
         (NaN: not known, the label starts abandoned); the cross-view labelling starts at
-        the first frame whose 8 markers all triangulate."""
+        the first frame whose 8 markers all triangulate, and the trackers' settings are
+        then fitted to the subject's distance (`refit`)."""
         labels = np.asarray(labels, dtype=np.float64)
         if labels.shape != (len(cameras), N_MARKERS, 2):
             raise InputError(
@@ -147,7 +153,7 @@ class StageTracker:
             MarkerTracker(start, TrackerSettings.for_camera(camera, **(tracker or {})))
             for camera, start in zip(cameras, labels, strict=True)
         ]
-        return cls(cameras, trackers, None, cross_view)
+        return cls(cameras, trackers, None, cross_view, refit=tracker or {})
 
     def step(
         self,
@@ -199,9 +205,14 @@ class StageTracker:
 
     def _start_labeller(self, points: np.ndarray) -> None:
         """Start the cross-view labelling at markers `points` (8, 3) meters, and the
-        search for the standard pose facing as their shoulders do."""
+        search for the standard pose facing as their shoulders do; with `refit`, fit the
+        trackers' settings to the subject's distance there."""
         assert self._cross_view is not None
         self._labeller = CrossViewLabeller(self.cameras, points, self._cross_view)
+        if self._refit is not None:
+            for camera, tracker in zip(self.cameras, self.trackers, strict=True):
+                distance = subject_distance(camera, points)
+                tracker.settings = TrackerSettings.for_camera(camera, distance, **self._refit)
         if self._searches and self._search is None:
             heading = heading_of(points[list(SHOULDERS)])
             self._search = StandardPoseSearch(self.cameras, heading_deg=heading)
