@@ -83,7 +83,7 @@ class TrackerSettings:
     little, so a narrower prior held a walk on a leaf with the feet together for half
     of each stride while the true stride paid 20-35 nats (bench_silhouette, walking:
     9.7 -> 8.5 cm and 11.5 -> 9.0 cm on two sets of held-out takes, 0.06 m before; the
-    other motions unchanged).
+    other motions within 0.4 cm).
     `likelihood_sigma`: the least sigma of Eq. 3 on the 320-pixel-wide level, in units
     of the distance (scaled with the image width for "core" and "normalised", whose
     distances are in pixels); a noisy silhouette matches no node well, so sigma grows to
