@@ -23,13 +23,16 @@ the track where it was.
 
 Beyond the paper's distance, the best `symmetric_leaves` leaves by that score are
 scored again with a symmetric one: the paper's distance, whose weights come from the
-observed silhouette, plus the XOR weighted by the leaf's own core-weighted map
-(`samba.silhouette_distance.model_weighted_distances`; plain XOR for "xor"), with sigma
-taken again from the best of them. The one-sided distance barely charges what lies near
-the observed outline: legs together, inside the outline of a walker's two legs, or a
-body turned the mirror way past the side view, cost little, while a leaf one limb's
-width off costs a lot. The leaf's own weights charge its structure missing from the
-frame (bench_silhouette: turning 13.2 -> 5.6 cm, walking 12.8 -> 9.7 cm).
+observed silhouette, plus `leaf_side_weight` times the XOR weighted by the leaf's own
+core-weighted map (`samba.silhouette_distance.model_weighted_distances`; plain XOR for
+"xor"), with sigma taken again from the best of them. The one-sided distance barely
+charges what lies near the observed outline: legs together, inside the outline of a
+walker's two legs, a leaf a tenth bigger than the subject, or a body turned the mirror
+way past the side view, cost little, while a leaf one limb's width off costs a lot. The
+leaf's own weights charge its structure missing from the frame (bench_silhouette:
+turning 13.2 -> 5.6 cm, walking 12.8 -> 9.7 cm); weighing them three times (walking
+8.5 -> 7.5 cm) lets a leaf whose thin legs lie a few pixels off the observed ones win
+against a bigger one with the feet together that covers them.
 
 Beyond the paper's first-order model (Eq. 8), each part's Gaussian is centred
 `velocity_gain` of the last step ahead: the change between the best leaves of the two
@@ -101,6 +104,7 @@ class TrackerSettings:
     flattens their weights in the estimate (0: the best leaf alone).
     `symmetric_leaves`: the best this many leaves are scored again with the symmetric
     distance (module docstring); 0 keeps the paper's one-sided distance.
+    `leaf_side_weight` (> 0): the weight of the leaf's side of the symmetric distance.
     """
 
     distance: str = "normalised"
@@ -118,6 +122,7 @@ class TrackerSettings:
     posterior_size: int = 30
     mean_temperature: float = 3.0
     symmetric_leaves: int = 30
+    leaf_side_weight: float = 3.0
 
     def __post_init__(self) -> None:
         if self.distance not in DISTANCES:
@@ -147,6 +152,10 @@ class TrackerSettings:
         if not (isinstance(self.symmetric_leaves, int) and self.symmetric_leaves >= 0):
             raise InputError(
                 "symmetric_leaves", f"must be an integer >= 0, got {self.symmetric_leaves!r}"
+            )
+        if not (np.isfinite(self.leaf_side_weight) and self.leaf_side_weight > 0):
+            raise InputError(
+                "leaf_side_weight", f"must be finite and > 0, got {self.leaf_side_weight}"
             )
         if not (self.relative_sigma > 0 and 0 <= self.start_tolerance <= 180):
             raise InputError("relative_sigma", "must be > 0 (start_tolerance in 0..180)")
@@ -229,7 +238,7 @@ class SilhouetteTracker:
                 top = np.argsort(scores)[::-1][: settings.symmetric_leaves]
                 nodes, prior = nodes[top], prior[top]
                 masks = tree_level.silhouettes.subset(nodes).to_masks()
-                distances = distances[top] + model_weighted_distances(
+                distances = distances[top] + settings.leaf_side_weight * model_weighted_distances(
                     masks, image, "xor" if settings.distance == "xor" else "core"
                 )
                 scores = prior + self._log_likelihood(distances, size[0], leaves)

@@ -60,6 +60,8 @@ def _facing_leaves_of_take(tree: ShapeTree, sources: np.ndarray, take: int) -> n
         ("relative_sigma", 0.0),
         ("keep", (40, 120)),
         ("keep", (40, 0, 400)),
+        ("leaf_side_weight", 0.0),
+        ("leaf_side_weight", float("inf")),
     ],
 )
 def test_settings_reject_bad_values(field: str, value: object) -> None:
