@@ -141,6 +141,42 @@ def test_a_branch_seen_in_enough_frames_is_in_the_model_whatever_its_shape() -> 
     assert fit_sequence([_star(5)] * 22 + tail[:8]).model.branch_count == 5  # 27%: noise
 
 
+def _bridged(bridge: float | None) -> FrameModel:
+    """A trunk 0.3 m up from the root, radius 0.1 m, carrying a neck and two legs from
+    its end; with `bridge` (m), the legs part at the end of a branch that long (radius
+    0.1 m) down one leg instead."""
+    top = np.array([0.0, 0.3, 0.0])
+    trunk = Branch(-1, np.linspace(np.zeros(3), top, 4), np.zeros(0), radius=0.1)
+    neck = Branch(0, np.linspace(top, top + np.array([0.0, 0.2, 0.0]), 4), np.zeros(0), radius=0.05)
+    feet = [top + np.array([side, -0.5, 0.0]) for side in (-0.1, 0.1)]
+    if bridge is None:
+        legs = [Branch(0, np.linspace(top, f, 6), np.zeros(0), radius=0.05) for f in feet]
+        return FrameModel(np.zeros(3), (trunk, neck, *legs))
+    fork = top - np.array([0.0, bridge, 0.0])
+    middle = Branch(0, np.linspace(top, fork, 3), np.zeros(0), radius=0.1)
+    legs = [Branch(2, np.linspace(fork, f, 6), np.zeros(0), radius=0.05) for f in feet]
+    return FrameModel(np.zeros(3), (trunk, neck, middle, *legs))
+
+
+def test_merging_two_branching_nodes_gives_the_tree_without_the_branch_between() -> None:
+    one_node = _bridged(None).signature()
+    assert _bridged(0.4).signature() != one_node
+    assert _bridged(0.4).merged_signatures(2.0) == {one_node}  # 4 radii long
+    assert _bridged(0.1).merged_signatures(2.0) == set()  # 1 radius: not merged
+    assert _bridged(None).merged_signatures(0.0) == set()  # nothing to merge
+
+
+def test_a_loop_cut_in_some_frames_does_not_set_the_model() -> None:
+    # The legs part at the neck in 4 frames and 40 cm down one leg (a loop of the volume
+    # cut there) in 6: those count for the one-node tree too, which the model takes.
+    fit = fit_sequence([_bridged(None)] * 4 + [_bridged(0.4)] * 6)
+    assert fit.model.signature == _bridged(None).signature()
+    assert fit.model.parents == (-1, 0, 0, 0)  # trunk, neck, two legs
+    # A short branch (the legs leaving the body lower down) is left to the majority.
+    short = fit_sequence([_bridged(None)] * 4 + [_bridged(0.1)] * 6)
+    assert short.model.signature == _bridged(0.1).signature()
+
+
 def test_a_branch_gets_the_joint_count_its_frames_have_most_often() -> None:
     # One joint at mid-length, where the branch bends, in 7 frames; in 3 the skewness
     # test cut it five times over. The mean count (2.2) would round to 2 joints.
