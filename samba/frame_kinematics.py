@@ -138,7 +138,7 @@ class FrameModel:
         than `longer_than` times its radius, contracted."""
         parents = [b.parent for b in self.branches]
         out = set()
-        for bridge in sorted({p for p in parents if p >= 0}):
+        for bridge in {p for p in parents if p >= 0}:
             branch = self.branches[bridge]
             if branch.parent >= 0 and branch.length > longer_than * branch.radius:
                 merged = [branch.parent if p == bridge else p for p in parents]

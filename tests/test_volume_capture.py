@@ -143,8 +143,8 @@ def test_a_branch_seen_in_enough_frames_is_in_the_model_whatever_its_shape() -> 
 
 def _bridged(bridge: float | None) -> FrameModel:
     """A trunk 0.3 m up from the root, radius 0.1 m, carrying a neck and two legs from
-    its end; with `bridge` (m), the legs part at the end of a branch that long (radius
-    0.1 m) down one leg instead."""
+    its end; with `bridge` (m), the legs part instead at the end of a branch that long
+    (radius 0.1 m) running down from the trunk's end."""
     top = np.array([0.0, 0.3, 0.0])
     trunk = Branch(-1, np.linspace(np.zeros(3), top, 4), np.zeros(0), radius=0.1)
     neck = Branch(0, np.linspace(top, top + np.array([0.0, 0.2, 0.0]), 4), np.zeros(0), radius=0.05)
