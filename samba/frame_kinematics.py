@@ -78,20 +78,6 @@ class Branch:
         return points_along(self.points, fractions)
 
 
-def _tree_signature(parents: list[int]) -> str:
-    """A canonical string of the tree whose branch i starts at the end of branch
-    `parents[i]` (-1: at the root; -2: not in the tree)."""
-    children: list[list[int]] = [[] for _ in range(len(parents) + 1)]
-    for i, parent in enumerate(parents):
-        if parent >= -1:
-            children[parent + 1].append(i + 1)
-
-    def encode(node: int) -> str:
-        return "(" + "".join(sorted(encode(c) for c in children[node])) + ")"
-
-    return encode(0)
-
-
 def arc_lengths(polylines: np.ndarray) -> np.ndarray:
     """Arc length (..., p) from the start to each vertex of polylines (..., p, 3)."""
     steps = np.linalg.norm(np.diff(polylines, axis=-2), axis=-1)
@@ -130,21 +116,14 @@ class FrameModel:
 
     def signature(self) -> str:
         """A canonical string of the branch tree's shape (equal for isomorphic trees)."""
-        return _tree_signature([b.parent for b in self.branches])
+        children: list[list[int]] = [[] for _ in range(len(self.branches) + 1)]
+        for i, branch in enumerate(self.branches):
+            children[branch.parent + 1].append(i + 1)
 
-    def merged_signatures(self, longer_than: float) -> set[str]:
-        """Signatures of the trees this one becomes when two of its branching nodes merge
-        into one: a branch that carries others, starts at another's end and is longer
-        than `longer_than` times its radius, contracted."""
-        parents = [b.parent for b in self.branches]
-        out = set()
-        for bridge in {p for p in parents if p >= 0}:
-            branch = self.branches[bridge]
-            if branch.parent >= 0 and branch.length > longer_than * branch.radius:
-                merged = [branch.parent if p == bridge else p for p in parents]
-                merged[bridge] = -2  # gone
-                out.add(_tree_signature(merged))
-        return out
+        def encode(node: int) -> str:
+            return "(" + "".join(sorted(encode(c) for c in children[node])) + ")"
+
+        return encode(0)
 
     def is_humanoid(self) -> bool:
         """Five leaf branches (head, two arms, two legs) hanging off one trunk: the

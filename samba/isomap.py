@@ -1,6 +1,7 @@
 """Isomap of a voxel volume: geodesic distances over the voxels' neighbourhood graph,
-embedded in 3-D, so a posed articulated body unfolds to a pose-invariant "Da Vinci"
-posture (Chu, Jenkins, Matarić 2003, Section 3; Tenenbaum et al. 2000).
+embedded in 3-D (or more, `TIED`), so a posed articulated body unfolds to a
+pose-invariant "Da Vinci" posture (Chu, Jenkins, Matarić 2003, Section 3; Tenenbaum et
+al. 2000).
 
 The neighbourhood graph joins voxels within an epsilon ball: with the default
 epsilon of sqrt(3) voxels, each voxel is joined to its 26 grid neighbours, with the
@@ -24,6 +25,27 @@ from samba.errors import InputError
 
 LANDMARKS = 48
 """Landmarks of the embedding by default; 3-D needs >= 4, the shape needs a few dozen."""
+TIED = 0.8
+"""Share of the last kept eigenvalue above which the next one ties it and the embedding
+takes its dimension too (when it is `SIGNIFICANT`). Cutting between two near-equal
+eigenvalues keeps an arbitrary mix of their directions and folds what the dropped one
+separates: the quadruped of `bench/bench_volume.py` spreads its front legs and its hind
+legs left and right alike (the spread of the 4th embedded coordinate is 0.56-1.06 of the
+3rd's, median 0.9), and its 3-D embedding put the front feet 1-4 voxels apart in most
+frames, 32 voxels apart along the volume, so one shell cluster held both legs and the
+frame model had one front leg. Human volumes' 4th spread is 0.14-0.6 of the 3rd with the
+limbs held apart, 0.3-2 with the arms at the body; a human volume embedded in 4-D gets
+short extra branches where the visual hull's blocky limbs fan out, so the share is set
+high: at 0.8 the quadruped's 12 takes (seeds 1-5, 11-13, 31-34) went from 190 to 170
+links (true 156) with true joints within 2 voxels 77% -> 91% on average, the 68 human
+takes of those seeds kept their human models (the exaggerated ones unchanged, 8 natural
+ones moved: 8.81 -> 8.86 cm on average); at 0.7 one natural take lost its human model
+and the rest went to 9.03 cm."""
+SIGNIFICANT = 0.02
+"""Share of the first eigenvalue below which a dimension never joins the embedding: a
+thin chain's 2nd to 4th spreads (0.005-0.015 of the 1st) are its thickness, and ties
+among them are noise (with no floor, the 6-link chain of `bench/bench_volume.py` lost
+a link in one of 12 takes); the quadruped's 4th is 0.037-0.051 of its 1st."""
 
 
 @dataclass(frozen=True)
@@ -114,9 +136,9 @@ def _keys(indices: np.ndarray, span: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Embedding:
-    """An Isomap embedding: `points` (m, 3) intrinsic coordinates in voxel units centred
-    on their mean, the `landmarks` (L,) used and their geodesic distances `geodesic`
-    (L, m) in voxel units."""
+    """An Isomap embedding: `points` (m, d) intrinsic coordinates in voxel units centred on
+    their mean (d >= 3 dimensions), the `landmarks` (L,) used and their geodesic
+    distances `geodesic` (L, m) in voxel units."""
 
     points: np.ndarray
     landmarks: np.ndarray
@@ -124,7 +146,9 @@ class Embedding:
 
 
 def isomap(graph: VoxelGraph, landmarks: int = LANDMARKS, dims: int = 3) -> Embedding:
-    """Landmark Isomap of a connected `graph` into `dims` dimensions.
+    """Landmark Isomap of a connected `graph` into `dims` dimensions, and one more for
+    each further eigenvalue of the landmarks' MDS that ties the last one kept (`TIED`)
+    and is `SIGNIFICANT`.
 
     Landmarks are picked by farthest-point sampling in geodesic distance, starting from
     the voxel farthest from the first one (deterministic). The edge matrix holds both
@@ -154,7 +178,11 @@ def isomap(graph: VoxelGraph, landmarks: int = LANDMARKS, dims: int = 3) -> Embe
     centring = np.eye(count) - 1.0 / count
     gram = -0.5 * centring @ landmark_squared @ centring
     values, vectors = np.linalg.eigh(gram)
-    top = np.argsort(values)[::-1][:dims]
+    order = np.argsort(values)[::-1]
+    least = SIGNIFICANT * values[order[0]]
+    while dims < count and values[order[dims]] >= max(TIED * values[order[dims - 1]], least):
+        dims += 1
+    top = order[:dims]
     values = np.maximum(values[top], 1e-12)
     pseudo_inverse = vectors[:, top].T / np.sqrt(values)[:, None]
     points = -0.5 * (pseudo_inverse @ (squared - landmark_squared.mean(axis=1, keepdims=True))).T

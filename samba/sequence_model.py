@@ -6,9 +6,7 @@ in at least `BRANCH_SUPPORT` of the frames: a thin limb (a tail, an arm held aga
 the body) merges with the body in many frames and is its own branch in the others,
 while refinement has already removed each frame's noise branches. Of the frames with
 that many ends, the branch tree seen most often is the common topology, and the first
-frame that has it is the reference; a frame counts also for the trees it becomes when
-two of its branching nodes, joined by a long branch (`LOOP_RADII`), merge into one.
-Walking from the reference to both ends of the sequence,
+frame that has it is the reference. Walking from there to both ends of the sequence,
 each frame's branches are matched to the model's branches as last seen (one-to-one, by
 the Hungarian method, minimising the summed squared distance between the two branches
 resampled at the same fractions of their length: the distance of their parents, their
@@ -90,22 +88,6 @@ dropped. On the quadruped of `bench/bench_volume.py` (seeds 1-5) the tail's or a
 last joint sat 0.2-1.4 voxels before the end in three takes; dropping it took 1 link off
 each with the same true joints within 2 voxels (0.5 radii took 2, 1.5 took 4; the
 human takes of seeds 1-5 moved by +0.02 to +0.03 cm on average at 0.5 to 1.5)."""
-LOOP_RADII = 2.0
-"""A branch between two branching nodes longer than this many of its radii, which some
-frames have and others do not (their two nodes are one), is counted for the trees
-without it too (`_common_signature`). Where a quadruped's front feet touch, the volume
-closes a loop that the shells cut: the front legs then part from a branch 1.2-10 radii
-long running down one leg instead of at the withers, in about as many frames as part
-at the withers. Shorter such branches are where a limb leaves the body: a natural
-wave's arms part from a branch 0.7-1.6 radii below the neck in most frames, which the
-humanoid mapping reads (`samba.volume_humanoid` places the shoulders from there).
-Counting the longer ones took the quadruped of `bench/bench_volume.py` (seeds 1-5 /
-11-13 / 31-34) from 84 / 51 / 66 links to 77 / 50 / 63 (true: 13 a take); the 68 human
-takes of those seeds kept their models. Counting branches of any length took two
-natural waves from 6.2 / 6.1 to 7.0 / 7.6 cm; fitting, besides, the frames merged where
-that branch is under 2 radii (its curve leading into the limbs it carried) gained 0.3 cm
-on the human takes on average but not those waves back, and the 1.5 s natural wave of
-`tests/test_volume_capture.py` had its shoulders 11.7 cm off (under 9 cm now)."""
 FRAME_CHUNK = 64
 """Frames whose straight-link distances `_link_costs` computes at once (memory: about
 12,000 sample-link pairs per frame)."""
@@ -182,7 +164,8 @@ def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
     supported = options[frequency >= BRANCH_SUPPORT * len(frames)]
     chosen = supported.max() if len(supported) else options[np.argmax(frequency)]
     signatures = [f.signature() if e == chosen else "" for f, e in zip(frames, ends, strict=True)]
-    signature = _common_signature(frames, signatures)
+    values, counts = np.unique([s for s in signatures if s], return_counts=True)
+    signature = str(values[np.argmax(counts)])
     reference = signatures.index(signature)
     base = frames[reference]
     n, count = len(frames), len(base.branches)
@@ -226,19 +209,6 @@ def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
                 placed[t] = branch.at(np.append(model.joints[b], end) * stops[b])
         points.append(_fill_in_time(placed))
     return SequenceFit(model=model, matches=matches, root=root, branch_points=tuple(points))
-
-
-def _common_signature(frames: list[FrameModel], signatures: list[str]) -> str:
-    """The branch tree seen most often among the frames with a `signatures` entry (""
-    for the others), each frame counting also for the trees it becomes when two of its
-    branching nodes, joined by a branch longer than `LOOP_RADII` of its radius, merge."""
-    values, counts = np.unique([s for s in signatures if s], return_counts=True)
-    votes = dict(zip(values.tolist(), counts.tolist(), strict=True))
-    for frame, own in zip(frames, signatures, strict=True):
-        if own:
-            for merged in frame.merged_signatures(LOOP_RADII) & votes.keys():
-                votes[merged] += 1
-    return max(votes, key=votes.__getitem__)
 
 
 def _match(last: list[np.ndarray], branches: tuple[Branch, ...]) -> np.ndarray:

@@ -35,7 +35,7 @@ class ShellSettings:
     the volume's mean, stays deep enough to survive; on jumping jacks and waving,
     tuning seeds 1-3, the worst take's frames with human topology went from 57% with
     25 shells to 87%). `separation`: sweep-and-prune gap
-    per axis, in voxels of the embedding, that separates two clusters of a shell.
+    on any axis, in voxels of the embedding, that separates two clusters of a shell.
     `shepard_neighbours` and `shepard_power`: the embedded points nearest a curve point
     that interpolate its Euclidean position, weighted by 1 / distance ** power.
     `noise_depth`: leaf branches spanning fewer shells are noise. `root_spread`: a
@@ -44,7 +44,7 @@ class ShellSettings:
     """
 
     shell_width: float = 1.4
-    separation: tuple[float, float, float] = (2.0, 2.0, 2.0)
+    separation: float = 2.0
     shepard_neighbours: int = 8
     shepard_power: float = 2.0
     noise_depth: int = 3
@@ -55,7 +55,7 @@ class ShellSettings:
 class SkeletonCurve:
     """A tree of skeleton-curve points of one volume.
 
-    `points` (k, 3) Euclidean positions, meters; `intrinsic` (k, 3) positions in the
+    `points` (k, 3) Euclidean positions, meters; `intrinsic` (k, d) positions in the
     embedding, voxels; `parents` (k,) int, -1 for the root (node 0), parents before
     children; `shell` (k,) the shell of each point (the root's is its outermost merged
     shell); `members` (m,) the node each voxel of the volume belongs to (-1 for voxels
@@ -126,7 +126,7 @@ def skeleton_curve(
     shell = np.minimum((radius / width).astype(np.int64), shells - 1)
     cluster = np.empty(len(y), dtype=np.int64)
     cluster_shell = []
-    separation = np.asarray(settings.separation, dtype=np.float64)
+    separation = np.full(y.shape[1], settings.separation)
     for s in range(shells):
         inside = np.flatnonzero(shell == s)
         labels = sweep_and_prune(y[inside], separation)
@@ -174,7 +174,7 @@ def _link(
     order = np.lexsort((-hits, pairs[:, 0])) if len(pairs) else np.zeros(0, dtype=np.int64)
     first = order[np.r_[True, pairs[order[1:], 0] != pairs[order[:-1], 0]]] if len(order) else order
     parent[pairs[first, 0]] = pairs[first, 1]
-    means = np.zeros((count, 3))
+    means = np.zeros((count, y.shape[1]))
     np.add.at(means, cluster, y)
     means /= np.bincount(cluster, minlength=count)[:, None]
     for orphan in np.flatnonzero((parent < 0) & (cluster_shell > cluster_shell.min())):
@@ -217,7 +217,7 @@ class _Tree:
         shell holds several clusters."""
         count = len(cluster_parent)
         sizes = np.bincount(cluster, minlength=count)
-        intrinsic = np.zeros((count, 3))
+        intrinsic = np.zeros((count, y.shape[1]))
         np.add.at(intrinsic, cluster, y)
         intrinsic /= np.maximum(sizes, 1)[:, None]
         tree = cKDTree(y)
@@ -231,7 +231,7 @@ class _Tree:
         parent = [-1] * offset + [int(p) + offset if p >= 0 else 0 for p in cluster_parent]
         if offset == 0:
             parent[int(roots[0])] = -1
-        node_intrinsic = [np.zeros(3)] * offset + list(intrinsic)
+        node_intrinsic = [np.zeros(y.shape[1])] * offset + list(intrinsic)
         node_points = [positions.mean(axis=0)] * offset + list(euclidean)
         shell = [0] * offset + [int(s) for s in cluster_shell]
         return cls(parent, shell, node_intrinsic, node_points, cluster + offset)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from samba.articulated_figure import long_chain, quadruped
+from samba.articulated_figure import creature_motion, long_chain, quadruped
 from samba.errors import InputError
 from samba.frame_kinematics import Branch, FrameModel, frame_model
 from samba.isomap import VoxelGraph, isomap
@@ -58,6 +58,27 @@ def test_isomap_unfolds_a_bent_bar_to_its_length() -> None:
     points = isomap(graph).points
     span = np.ptp(points @ np.linalg.svd(points, full_matrices=False)[2][0])
     assert span == pytest.approx(40 + 34 - 4, rel=0.1)  # the path along the bar, not 50
+    assert points.shape[1] == 3  # a bar's thickness adds no dimension
+
+
+def test_isomap_keeps_a_quadrupeds_front_legs_apart() -> None:
+    # A frame whose 3-D embedding put the front feet 3 voxels apart (32 along the
+    # volume): front and hind legs spread left and right alike, two tied eigenvalues.
+    figure, box = quadruped(), np.array([[-1.0, 0.0, -1.0], [1.0, 1.2, 1.0]])
+    grid = VoxelGrid.from_bounds(box[0], box[1], 0.025)
+    joints = figure.positions(creature_motion(figure, 30, seed=12, bounds=box))[10:11]
+    indices = grid.indices(figure.voxelize(joints, grid)[0])
+    graph = VoxelGraph.from_indices(indices)
+    embedding = isomap(graph)
+    positions = grid.points_at(indices)
+    feet = [
+        np.argmin(np.linalg.norm(positions - joints[0, figure.names.index(name)], axis=1))
+        for name in ("front_left_foot", "front_right_foot")
+    ]
+    assert embedding.points.shape[1] >= 4
+    assert np.linalg.norm(np.subtract(*embedding.points[feet])) > 20.0
+    model = frame_model(skeleton_curve(embedding, graph, positions), positions)
+    assert model.leaf_count == 6  # head, tail and four legs
 
 
 def test_a_capsules_ends_lie_one_radius_inside_its_tips() -> None:
@@ -115,8 +136,8 @@ def test_long_chain_gives_two_ends_and_its_links() -> None:
 def test_quadruped_branches_are_recovered() -> None:
     report = creature_take(quadruped(), "quadruped", seed=0, frames=16)
     assert report.model_ends == report.true_ends == 6
-    assert report.model_links >= report.true_links  # over-segmented, never under
-    assert report.joints_found >= 0.4
+    assert report.true_links <= report.model_links <= report.true_links + 2
+    assert report.joints_found >= 0.85
 
 
 def _star(ends: int, forked: bool = False) -> FrameModel:
@@ -139,42 +160,6 @@ def test_a_branch_seen_in_enough_frames_is_in_the_model_whatever_its_shape() -> 
     tail = [_star(6)] * 6 + [_star(6, forked=True)] * 6
     assert fit_sequence([_star(5)] * 18 + tail).model.branch_count == 6
     assert fit_sequence([_star(5)] * 22 + tail[:8]).model.branch_count == 5  # 27%: noise
-
-
-def _bridged(bridge: float | None) -> FrameModel:
-    """A trunk 0.3 m up from the root, radius 0.1 m, carrying a neck and two legs from
-    its end; with `bridge` (m), the legs part instead at the end of a branch that long
-    (radius 0.1 m) running down from the trunk's end."""
-    top = np.array([0.0, 0.3, 0.0])
-    trunk = Branch(-1, np.linspace(np.zeros(3), top, 4), np.zeros(0), radius=0.1)
-    neck = Branch(0, np.linspace(top, top + np.array([0.0, 0.2, 0.0]), 4), np.zeros(0), radius=0.05)
-    feet = [top + np.array([side, -0.5, 0.0]) for side in (-0.1, 0.1)]
-    if bridge is None:
-        legs = [Branch(0, np.linspace(top, f, 6), np.zeros(0), radius=0.05) for f in feet]
-        return FrameModel(np.zeros(3), (trunk, neck, *legs))
-    fork = top - np.array([0.0, bridge, 0.0])
-    middle = Branch(0, np.linspace(top, fork, 3), np.zeros(0), radius=0.1)
-    legs = [Branch(2, np.linspace(fork, f, 6), np.zeros(0), radius=0.05) for f in feet]
-    return FrameModel(np.zeros(3), (trunk, neck, middle, *legs))
-
-
-def test_merging_two_branching_nodes_gives_the_tree_without_the_branch_between() -> None:
-    one_node = _bridged(None).signature()
-    assert _bridged(0.4).signature() != one_node
-    assert _bridged(0.4).merged_signatures(2.0) == {one_node}  # 4 radii long
-    assert _bridged(0.1).merged_signatures(2.0) == set()  # 1 radius: not merged
-    assert _bridged(None).merged_signatures(0.0) == set()  # nothing to merge
-
-
-def test_a_loop_cut_in_some_frames_does_not_set_the_model() -> None:
-    # The legs part at the neck in 4 frames and 40 cm down one leg (a loop of the volume
-    # cut there) in 6: those count for the one-node tree too, which the model takes.
-    fit = fit_sequence([_bridged(None)] * 4 + [_bridged(0.4)] * 6)
-    assert fit.model.signature == _bridged(None).signature()
-    assert fit.model.parents == (-1, 0, 0, 0)  # trunk, neck, two legs
-    # A short branch (the legs leaving the body lower down) is left to the majority.
-    short = fit_sequence([_bridged(None)] * 4 + [_bridged(0.1)] * 6)
-    assert short.model.signature == _bridged(0.1).signature()
 
 
 def test_a_branch_gets_the_joint_count_its_frames_have_most_often() -> None:
