@@ -36,14 +36,14 @@ branches a frame lacks are interpolated in time between the frames that have the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import gaussian_kde
 
 from samba.errors import InputError
-from samba.frame_kinematics import Branch, FrameModel, points_along
+from samba.frame_kinematics import Branch, FrameModel, arc_lengths, points_along
 from samba.segments import point_segment_distances
 
 RESAMPLE = np.linspace(0.0, 1.0, 6)
@@ -88,6 +88,11 @@ dropped. On the quadruped of `bench/bench_volume.py` (seeds 1-5) the tail's or a
 last joint sat 0.2-1.4 voxels before the end in three takes; dropping it took 1 link off
 each with the same true joints within 2 voxels (0.5 radii took 2, 1.5 took 4; the
 human takes of seeds 1-5 moved by +0.02 to +0.03 cm on average at 0.5 to 1.5)."""
+ROOT_STEP = 0.005
+"""Spacing (m) of the root positions `_root_at_bend` tries along the trunk."""
+ROOT_BEND = 0.010
+"""RMS distance (m) that moving the root to the trunk's bend must take off the trunk's
+two-link fit (per sample and frame) for the root to move (`_root_at_bend`)."""
 FRAME_CHUNK = 64
 """Frames whose straight-link distances `_link_costs` computes at once (memory: about
 12,000 sample-link pairs per frame)."""
@@ -179,6 +184,7 @@ def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
                 if found >= 0:
                     last[b] = frames[t].branches[found].points
     parents = tuple(b.parent for b in base.branches)
+    frames = _root_at_bend(frames, matches, parents)
     joints, lengths, stops = [], np.zeros(count), np.ones(count)
     for b in range(count):
         matched = [frames[t].branches[matches[t, b]] for t in range(n) if matches[t, b] >= 0]
@@ -209,6 +215,68 @@ def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
                 placed[t] = branch.at(np.append(model.joints[b], end) * stops[b])
         points.append(_fill_in_time(placed))
     return SequenceFit(model=model, matches=matches, root=root, branch_points=tuple(points))
+
+
+def _root_at_bend(
+    frames: list[FrameModel], matches: np.ndarray, parents: tuple[int, ...]
+) -> list[FrameModel]:
+    """The frames with the root moved along the trunk to where it bends, when the
+    model's root starts two branches that both carry others (the trunk's halves).
+
+    Every frame with both halves matched (`matches` (n, B)) gives the trunk's curve from
+    one half's end through the root to the other's; one offset from the root (m of arc,
+    into either half, at most halfway along the shorter of each half, in `ROOT_STEP`
+    steps) is chosen for all of them: the one at which two straight links meeting there
+    fit the curves best (summed squared distance of `SAMPLES` points of each curve),
+    when it takes at least `ROOT_BEND` squared per sample and frame off the fit with the
+    root where it is. Those frames' halves are cut again there, their skewness joints
+    kept where they fall but within `JUNCTION` of the half's radius of the new root,
+    which stands for them.
+    """
+    halves = [b for b, parent in enumerate(parents) if parent < 0]
+    if len(halves) != 2 or not set(halves) <= set(parents):
+        return frames
+    seen = np.flatnonzero((matches[:, halves] >= 0).all(axis=1))
+    if len(seen) == 0:
+        return frames
+    pairs = [[frames[t].branches[matches[t, h]] for h in halves] for t in seen]
+    curves = [np.concatenate([one.points[::-1], two.points[1:]]) for one, two in pairs]
+    roots = np.array([one.length for one, _ in pairs])
+    totals = np.array([float(arc_lengths(curve)[-1]) for curve in curves])
+    reach = np.array([roots.min(), (totals - roots).min()]) / 2.0
+    offsets = ROOT_STEP * np.arange(-int(reach[0] / ROOT_STEP), int(reach[1] / ROOT_STEP) + 1)
+    cost = np.zeros(len(offsets))
+    for curve, root, total in zip(curves, roots, totals, strict=True):
+        bends = points_along(curve, np.clip((root + offsets) / total, 0.0, 1.0))[:, None]
+        samples = points_along(curve, SAMPLES)[None]
+        near = np.minimum(
+            point_segment_distances(samples, curve[0], bends),
+            point_segment_distances(samples, bends, curve[-1]),
+        )
+        cost += (near**2).sum(axis=1)
+    if cost[offsets == 0.0][0] - cost.min() < ROOT_BEND**2 * len(curves) * len(SAMPLES):
+        return frames
+    offset = float(offsets[np.argmin(cost)])
+    out = list(frames)
+    for t, (one, two), curve, root, total in zip(seen, pairs, curves, roots, totals, strict=True):
+        arc, cut = arc_lengths(curve), root + offset
+        bend = points_along(curve, np.array([cut / total]))
+        along = np.concatenate([root * (1.0 - one.joints), root + two.joints * two.length])
+        near = JUNCTION * np.where(along < cut, one.radius, two.radius)
+        along = along[np.abs(along - cut) >= near]
+        branches = list(frames[t].branches)
+        branches[matches[t, halves[0]]] = replace(
+            one,
+            points=np.concatenate([bend, curve[arc < cut][::-1]]),
+            joints=np.sort((cut - along[along < cut]) / cut),
+        )
+        branches[matches[t, halves[1]]] = replace(
+            two,
+            points=np.concatenate([bend, curve[arc > cut]]),
+            joints=np.sort((along[along > cut] - cut) / (total - cut)),
+        )
+        out[t] = FrameModel(root=bend[0], branches=tuple(branches))
+    return out
 
 
 def _match(last: list[np.ndarray], branches: tuple[Branch, ...]) -> np.ndarray:

@@ -213,6 +213,32 @@ def test_a_leaf_drops_a_last_joint_in_its_round_tip() -> None:
     assert fit.branch_points[0][:, -1] == pytest.approx(np.tile(points[-1], (4, 1)))
 
 
+def _bent_trunk(degrees: float) -> FrameModel:
+    """A trunk along +x from x = -0.4 to 0.5 m (radius 0.1 m) that turns by `degrees`
+    towards +y at x = 0.1, its root at the origin, each half carrying a 0.3 m leg."""
+    turn = np.radians(degrees)
+    out = np.outer(np.linspace(0.0, 0.4, 9), [np.cos(turn), np.sin(turn), 0.0])
+    out[:, 0] += 0.1
+    front = np.concatenate([np.zeros((1, 3)), out])
+    back = np.linspace([0.0, 0.0, 0.0], [-0.4, 0.0, 0.0], 9)
+    halves = [Branch(-1, points, np.zeros(0), radius=0.1) for points in (back, front)]
+    legs = [
+        Branch(b, np.linspace(half.points[-1], half.points[-1] - [0.0, 0.3, 0.0], 7), np.zeros(0))
+        for b, half in enumerate(halves)
+    ]
+    return FrameModel(np.zeros(3), (*halves, *legs))
+
+
+def test_the_root_moves_to_where_the_trunk_bends() -> None:
+    # The trunk bends 10 cm from the root by up to 40 degrees; the root stands for that
+    # joint. A trunk that never bends keeps its root.
+    bends = 40.0 * np.abs(np.sin(np.pi * np.arange(8) / 8))
+    fit = fit_sequence([_bent_trunk(bend) for bend in bends])
+    assert fit.root == pytest.approx(np.tile([0.1, 0.0, 0.0], (8, 1)), abs=0.006)
+    assert fit.model.lengths[:2] == pytest.approx([0.5, 0.4], abs=0.006)
+    assert (fit_sequence([_bent_trunk(0.0)] * 8).root == 0.0).all()
+
+
 def _swinging(bends: np.ndarray, joints: list[np.ndarray], seed: int) -> list[FrameModel]:
     """Frames of one 0.6 m branch that turns by `bends` (n,) degrees at 0.4 of its
     length, swings about the root by up to 30 degrees and has per-frame skewness
