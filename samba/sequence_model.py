@@ -11,6 +11,8 @@ each frame's branches are matched to the model's branches as last seen (one-to-o
 the Hungarian method, minimising the summed squared distance between the two branches
 resampled at the same fractions of their length: the distance of their parents, their
 directions and their lengths in one number).
+Where the root starts the trunk's two halves, it moves to where the trunk bends
+(`_root_at_bend`): the shells' centre is the middle of the volume, not a joint.
 Then, per model branch, the joint fractions the skewness test placed in the matched
 frames form a 1-D sample; the branch gets the number of joints its matches have most
 often (`_joint_count`), placed at the highest peaks of the sample's density, and the
@@ -231,7 +233,7 @@ def _root_at_bend(
     when it takes at least `ROOT_BEND` squared per sample and frame off the fit with the
     root where it is. Those frames' halves are cut again there, their skewness joints
     kept where they fall but within `JUNCTION` of the half's radius of the new root,
-    which stands for them.
+    which stands for them; a frame lacking a half keeps its root.
     """
     halves = [b for b, parent in enumerate(parents) if parent < 0]
     if len(halves) != 2 or not set(halves) <= set(parents):
