@@ -244,7 +244,8 @@ def _root_at_bend(
     pairs = [[frames[t].branches[matches[t, h]] for h in halves] for t in seen]
     curves = [np.concatenate([one.points[::-1], two.points[1:]]) for one, two in pairs]
     roots = np.array([one.length for one, _ in pairs])
-    totals = np.array([float(arc_lengths(curve)[-1]) for curve in curves])
+    arcs = [arc_lengths(curve) for curve in curves]
+    totals = np.array([arc[-1] for arc in arcs])
     reach = np.array([roots.min(), (totals - roots).min()]) / 2.0
     offsets = ROOT_STEP * np.arange(-int(reach[0] / ROOT_STEP), int(reach[1] / ROOT_STEP) + 1)
     cost = np.zeros(len(offsets))
@@ -260,8 +261,8 @@ def _root_at_bend(
         return frames
     offset = float(offsets[np.argmin(cost)])
     out = list(frames)
-    for t, (one, two), curve, root, total in zip(seen, pairs, curves, roots, totals, strict=True):
-        arc, cut = arc_lengths(curve), root + offset
+    for t, (one, two), curve, arc, root in zip(seen, pairs, curves, arcs, roots, strict=True):
+        cut, total = root + offset, arc[-1]
         bend = points_along(curve, np.array([cut / total]))
         along = np.concatenate([root * (1.0 - one.joints), root + two.joints * two.length])
         near = JUNCTION * np.where(along < cut, one.radius, two.radius)
