@@ -15,18 +15,23 @@ Where the root starts the trunk's two halves, it moves to where the trunk bends
 (`_root_at_bend`): the shells' centre is the middle of the volume, not a joint.
 Then, per model branch, the joint fractions the skewness test placed in the matched
 frames form a 1-D sample; the branch gets the number of joints its matches have most
-often (`_joint_count`), placed at the highest peaks of the sample's density, and the
-mean length of its matches. A branch that carries others ends at its last joint
-instead of the branching node when that joint lies within `JUNCTION` of the branch's
-radius of the node (`_junction`): the two are one joint. A leaf branch drops a last
-joint that would leave it a last link shorter than `TIP_LINK` of its radius
-(`_off_the_tip`). Last, a joint stays only where the branch bends over the sequence
-(`_bent`): with the joints as breakpoints shared by every frame, each link is a
+often (`_joint_count`), placed at the highest peaks of the sample's density (which
+settle the two ends below), and the mean length of its matches. A branch that carries
+others ends at its last joint instead of the branching node when that joint lies within
+`JUNCTION` of the branch's radius of the node (`_junction`): the two are one joint. A
+leaf branch drops a last joint that would leave it a last link shorter than `TIP_LINK`
+of its radius (`_off_the_tip`). Last, the joints go where the branch bends over the
+sequence (`_bent`): with the joints as breakpoints shared by every frame, each link is a
 straight segment in every frame, and the fit's cost is the squared distance of the
-matched curves, sampled at `SAMPLES` of their length, from those segments. A joint
-whose removal raises that cost by less than `STRAIGHT` squared per sample and frame
-stands in a straight stretch of the branch (the skewness test cut a straight link in
-enough frames to carry the count) and is dropped, the weakest first.
+matched curves, sampled at `SAMPLES` of their length, from those segments. For each
+number of joints up to the count the best breakpoints are found exactly (dynamic
+programming over the samples); the count is lowered while one joint fewer raises the
+best fit's cost by less than `STRAIGHT` squared per sample and frame (the skewness test
+cut a straight link in enough frames to carry the count), and the joints sit at the best
+fit's breakpoints. The skewness test fires where the volume around the curve has already
+stopped being linear, a little past the bend: a 6-link chain's joints lay 2.4-3.5 voxels
+out from the true ones at the density's peaks and 0.3-0.7 at the breakpoints
+(`bench/bench_volume.py`, seeds 31, 33 and 3).
 
 Pass 3 places the model's joints on every frame's matched branches at those
 fractions, and each leaf branch's end where the frame's branch puts it, about one
@@ -92,21 +97,48 @@ each with the same true joints within 2 voxels (0.5 radii took 2, 1.5 took 4; th
 human takes of seeds 1-5 moved by +0.02 to +0.03 cm on average at 0.5 to 1.5)."""
 ROOT_STEP = 0.005
 """Spacing (m) of the root positions `_root_at_bend` tries along the trunk."""
-ROOT_BEND = 0.010
+ROOT_TRIM = 0.5
+"""Share of a trunk half's radius (`Branch.radius`, m) at its far end that
+`_root_at_bend` leaves out of its two-line fit: the branching node there lies off the
+trunk's axis, inside the limbs' roots, and pulls a line anchored at it. On the
+quadruped of `bench/bench_volume.py` the spine stands 0.063-0.068 m along the trunk
+from the middle of the volume; in the two takes where it bends least (36 degrees at
+most) two links anchored at the nodes, and two free lines over every sample, chose
+offsets of 0.02-0.03 m; with this trim, 0.05-0.055 m."""
+ROOT_STEADY = 0.2
+"""Largest spread (standard deviation over mean) of a trunk half's length over the
+frames for the root to move (`_root_at_bend`): one offset along the trunk stands for
+one place on the body only when the halves keep their lengths. The quadruped's halves
+spread 0.02-0.11; the legs of a human's jumping jacks part from the trunk at heights
+that vary from frame to frame (the lower half 0.19-0.59 m long, spread 0.35)."""
+ROOT_BEND = 0.003
 """RMS distance (m) that moving the root to the trunk's bend must take off the trunk's
-two-link fit (per sample and frame) for the root to move (`_root_at_bend`)."""
+two-line fit (per sample and frame) for the root to move (`_root_at_bend`). The
+quadruped's spine, bent 36-64 degrees at most over a take, took 3.3-9.5 mm off."""
 FRAME_CHUNK = 64
 """Frames whose straight-link distances `_link_costs` computes at once (memory: about
 12,000 sample-link pairs per frame)."""
 SAMPLES = np.linspace(0.0, 1.0, 41)
 """Fractions of a branch's length at which its matched curves are fitted by straight
 links (`_bent`): 1.5 cm apart on a quadruped's 0.6 m leg, under a voxel."""
+LINK_CAP = 1.0
+"""Distance, in radii of the branch (`Branch.radius`; no cap where it is 0, unknown),
+beyond which a sample of a matched curve costs the straight-link fit (`_bent`) no more:
+a frame whose match is another limb (two legs fused into one branch, or crossed) then
+costs every placement of the joints alike instead of pulling them. On the quadruped of
+`bench/bench_volume.py` (seeds 1-5, 11-13, 31-34) one front knee sat 2.6 voxels off
+without the cap, matched to the other leg in 7 of 30 frames and to a fused branch in
+4; with it, all but one of the 12 takes have every true joint within 2 voxels (the
+withers of one 2.0 voxels off) and 14 links (one take had 15 without it).
+Two radii did the same on the creatures; the human takes moved by 0.01 cm on average
+either way."""
 STRAIGHT = 0.014
 """RMS distance (m) from a branch's straight links that a joint must take off its
 matched curves (per sample and frame, over the whole branch) to stay (`_bent`). On the
 quadruped of `bench/bench_volume.py` (seeds 1-5, 25 mm voxels) every take kept a second
 joint in a straight stretch of a leg, the tail or the neck (where the skewness test
-cuts a link in many frames). Dropping joints worth less than 8, 10, 12, 14 and 16 mm
+cuts a link in many frames). With the joints at the density's peaks (before the best
+breakpoints placed them), dropping joints worth less than 8, 10, 12, 14 and 16 mm
 took the 94 links of the five takes to 90, 88, 86, 84 and 83, with the same true
 joints within 2 voxels and the chain's 6 links and joints; 18 mm took one true joint
 off quadruped-2 and a link off chain-3. The human takes of seeds 1-5 (30 mm voxels)
@@ -198,7 +230,7 @@ def fit_sequence(frames: list[FrameModel]) -> SequenceFit:
         else:
             end = float(np.mean([m.end for m in matched]))
             peaks = _off_the_tip(peaks, end, length, radius)
-        joints.append(_bent(peaks, matched, stops[b]))
+        joints.append(_bent(len(peaks), matched, stops[b]))
         lengths[b] = length * stops[b]
     model = CommonModel(
         parents=parents,
@@ -228,12 +260,14 @@ def _root_at_bend(
     Every frame with both halves matched (`matches` (n, B)) gives the trunk's curve from
     one half's end through the root to the other's; one offset from the root (m of arc,
     into either half, at most halfway along the shorter of each half, in `ROOT_STEP`
-    steps) is chosen for all of them: the one at which two straight links meeting there
-    fit the curves best (summed squared distance of `SAMPLES` points of each curve),
+    steps) is chosen for all of them: the one at which the curves' `SAMPLES` points,
+    but those within `ROOT_TRIM` of a half's radius of its far end, lie nearest two
+    straight lines, one on each side (summed squared distance, `_two_line_residuals`),
     when it takes at least `ROOT_BEND` squared per sample and frame off the fit with the
-    root where it is. Those frames' halves are cut again there, their skewness joints
-    kept where they fall but within `JUNCTION` of the half's radius of the new root,
-    which stands for them; a frame lacking a half keeps its root.
+    root where it is, and when neither half's length varies over those frames by more
+    than `ROOT_STEADY` of its mean. Those frames' halves are cut again there, their
+    skewness joints kept where they fall but within `JUNCTION` of the half's radius of
+    the new root, which stands for them; a frame lacking a half keeps its root.
     """
     halves = [b for b, parent in enumerate(parents) if parent < 0]
     if len(halves) != 2 or not set(halves) <= set(parents):
@@ -242,21 +276,21 @@ def _root_at_bend(
     if len(seen) == 0:
         return frames
     pairs = [[frames[t].branches[matches[t, h]] for h in halves] for t in seen]
+    lengths = np.array([[one.length, two.length] for one, two in pairs])
+    if (lengths.std(axis=0) > ROOT_STEADY * lengths.mean(axis=0)).any():
+        return frames
     curves = [np.concatenate([one.points[::-1], two.points[1:]]) for one, two in pairs]
-    roots = np.array([one.length for one, _ in pairs])
+    roots = lengths[:, 0]
     arcs = [arc_lengths(curve) for curve in curves]
     totals = np.array([arc[-1] for arc in arcs])
     reach = np.array([roots.min(), (totals - roots).min()]) / 2.0
     offsets = ROOT_STEP * np.arange(-int(reach[0] / ROOT_STEP), int(reach[1] / ROOT_STEP) + 1)
     cost = np.zeros(len(offsets))
-    for curve, root, total in zip(curves, roots, totals, strict=True):
-        bends = points_along(curve, np.clip((root + offsets) / total, 0.0, 1.0))[:, None]
-        samples = points_along(curve, SAMPLES)[None]
-        near = np.minimum(
-            point_segment_distances(samples, curve[0], bends),
-            point_segment_distances(samples, bends, curve[-1]),
-        )
-        cost += (near**2).sum(axis=1)
+    for (one, two), curve, root, total in zip(pairs, curves, roots, totals, strict=True):
+        along = SAMPLES * total
+        inner = (along > ROOT_TRIM * one.radius) & (along < total - ROOT_TRIM * two.radius)
+        cuts = np.searchsorted(along[inner], root + offsets)
+        cost += _two_line_residuals(points_along(curve, SAMPLES[inner]), cuts)
     if cost[offsets == 0.0][0] - cost.min() < ROOT_BEND**2 * len(curves) * len(SAMPLES):
         return frames
     offset = float(offsets[np.argmin(cost)])
@@ -280,6 +314,26 @@ def _root_at_bend(
         )
         out[t] = FrameModel(root=bend[0], branches=tuple(branches))
     return out
+
+
+def _two_line_residuals(points: np.ndarray, cuts: np.ndarray) -> np.ndarray:
+    """(C,) m^2: for each of `cuts` (C,), the summed squared distance of `points` (P, 3)
+    m from two least-squares lines, one through points[:cut] and one through
+    points[cut:] (a side of fewer than two points costs 0)."""
+    count = np.arange(len(points) + 1, dtype=np.float64)
+    first = np.concatenate([np.zeros((1, 3)), np.cumsum(points, axis=0)])
+    second = np.concatenate(
+        [np.zeros((1, 3, 3)), np.cumsum(points[:, :, None] * points[:, None], axis=0)]
+    )
+    total = np.zeros(len(cuts))
+    for n, sums, squares in (
+        (count[cuts], first[cuts], second[cuts]),
+        (count[-1] - count[cuts], first[-1] - first[cuts], second[-1] - second[cuts]),
+    ):
+        scatter = squares - sums[:, :, None] * sums[:, None] / np.maximum(n, 1.0)[:, None, None]
+        spread = np.linalg.eigvalsh(scatter)
+        total += np.where(n >= 2, spread[:, 0] + spread[:, 1], 0.0)
+    return total
 
 
 def _match(last: list[np.ndarray], branches: tuple[Branch, ...]) -> np.ndarray:
@@ -330,31 +384,27 @@ def _off_the_tip(peaks: np.ndarray, end: float, length: float, radius: float) ->
     return peaks
 
 
-def _bent(joints: np.ndarray, matched: list[Branch], stop: float) -> np.ndarray:
-    """The joints `joints` (k,) (fractions of the branches' curves up to `stop`) at which
-    the `matched` branches bend: without those whose removal raises the straight-link
-    fit's cost (`_link_costs`) by less than `STRAIGHT` squared per sample and frame,
-    dropped one by one, the one raising it least first."""
+def _bent(count: int, matched: list[Branch], stop: float) -> np.ndarray:
+    """The fractions (k,), k <= `count`, of the `matched` branches' curves up to `stop`
+    at which they bend: the breakpoints of the best straight-link fit with k joints
+    (`_best_fits`, each curve's samples counted at most `LINK_CAP` of the branches'
+    radius from a link), k lowered from `count` while one joint fewer raises that fit's
+    cost by less than `STRAIGHT` squared per sample and frame."""
+    count = min(count, len(SAMPLES) - 2)
     curves = np.stack([m.at(SAMPLES * stop) for m in matched])
-    costs = _link_costs(curves)
-    cuts = np.rint(joints * (len(SAMPLES) - 1)).astype(np.int64)
+    radius = float(np.mean([m.radius for m in matched]))
+    fits = _best_fits(_link_costs(curves, LINK_CAP * radius if radius > 0 else np.inf), count)
     floor = STRAIGHT**2 * curves.shape[0] * curves.shape[1]
-    keep = np.ones(len(cuts), dtype=bool)
-    while keep.any():
-        kept = np.flatnonzero(keep)
-        now = _fit_cost(costs, cuts[kept])
-        rises = [_fit_cost(costs, cuts[np.delete(kept, i)]) - now for i in range(len(kept))]
-        weakest = int(np.argmin(rises))
-        if rises[weakest] >= floor:
-            break
-        keep[kept[weakest]] = False
-    return joints[keep]
+    while count > 0 and fits[count - 1][0] - fits[count][0] < floor:
+        count -= 1
+    return fits[count][1] / (len(SAMPLES) - 1)
 
 
-def _link_costs(curves: np.ndarray) -> np.ndarray:
+def _link_costs(curves: np.ndarray, cap: float = np.inf) -> np.ndarray:
     """(s, s) m^2: for samples a < c of curves (n, s, 3) m, the summed squared distance,
     over the frames, of samples a..c from the segment between samples a and c (a link
-    straight in every frame); 0 on and below the diagonal."""
+    straight in every frame), each distance counted at most `cap` m; 0 on and below the
+    diagonal."""
     count = curves.shape[1]
     first, last = np.triu_indices(count, k=1)
     link, sample = np.nonzero(
@@ -366,17 +416,28 @@ def _link_costs(curves: np.ndarray) -> np.ndarray:
         distance = point_segment_distances(
             part[:, sample], part[:, first[link]], part[:, last[link]]
         )
-        total += np.bincount(link, (distance**2).sum(axis=0), len(first))
+        total += np.bincount(link, (np.minimum(distance, cap) ** 2).sum(axis=0), len(first))
     costs = np.zeros((count, count))
     costs[first, last] = total
     return costs
 
 
-def _fit_cost(costs: np.ndarray, cuts: np.ndarray) -> float:
-    """Cost (m^2) of the straight links between the samples `cuts` (k,), increasing,
-    and the curves' ends, from the link costs `costs` (s, s) (`_link_costs`)."""
-    ends = np.concatenate([[0], cuts, [len(costs) - 1]])
-    return float(costs[ends[:-1], ends[1:]].sum())
+def _best_fits(costs: np.ndarray, most: int) -> list[tuple[float, np.ndarray]]:
+    """For k = 0..`most` joints, the cheapest straight links from the first sample to
+    the last: (cost m^2, the k samples (k,) where the links meet), by dynamic
+    programming over the link costs `costs` (s, s) (`_link_costs`)."""
+    count = len(costs)
+    links = np.where(np.triu(np.ones((count, count), dtype=bool), k=1), costs, np.inf)
+    best = links[0]
+    paths = np.zeros((count, 0), dtype=np.int64)
+    fits = [(float(best[-1]), paths[-1])]
+    for _ in range(most):
+        total = best[:, None] + links
+        previous = np.argmin(total, axis=0)
+        best = total[previous, np.arange(count)]
+        paths = np.column_stack([paths[previous], previous])
+        fits.append((float(best[-1]), paths[-1]))
+    return fits
 
 
 def _leaf_end(end: float, joints: np.ndarray) -> float:

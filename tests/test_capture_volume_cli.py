@@ -34,8 +34,9 @@ JOINT_LIMIT_M = 0.25
 cameras of 320x240)."""
 FIXED_LENGTH_REACH_M = 0.5
 """How far (m) the BVH's joints may stray out of the capture volume: its links have
-the model's mean lengths, which carry limb ends past the measured ones (a foot 0.22 m
-below the floor here)."""
+the model's mean lengths, which carry limb ends past the measured ones (a foot 0.44 m
+below the floor here, where the legs part from the trunk at heights that vary over the
+take)."""
 POLE = np.array([[-0.15, 0.0, -0.15], [0.15, 1.7, 0.15]])
 """Corners (m) of the box-shaped pole of the non-human take."""
 POLE_FRAMES = 10
