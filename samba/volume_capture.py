@@ -151,21 +151,22 @@ class KinematicMotion:
 
 
 def pose_model(fit: SequenceFit, fps: float) -> KinematicMotion:
-    """The common model posed in every frame by the paper's axis construction."""
+    """The common model posed in every frame by the paper's axis construction, each
+    link as long as its fitted joints lie apart on average over the frames (the
+    straight distance: the curve between two joints is longer, and a leaf's curve runs
+    on past its end into the volume's round tip)."""
     model = fit.model
     n = len(fit.root)
-    names, parents, starts, ends, lengths = ["Root"], [-1], [fit.root], [fit.root], [0.0]
+    names, parents, starts, ends = ["Root"], [-1], [fit.root], [fit.root]
     last_link: dict[int, int] = {}
     for b, parent_branch in enumerate(model.parents):
         points = fit.branch_points[b]
-        fractions = np.concatenate([[0.0], model.joints[b], [1.0]])
         previous = 0 if parent_branch < 0 else last_link[parent_branch]
         for i in range(points.shape[1]):
             names.append(f"Branch{b + 1}_Link{i + 1}")
             parents.append(previous)
             starts.append(ends[previous])
             ends.append(points[:, i])
-            lengths.append(float((fractions[i + 1] - fractions[i]) * model.lengths[b]))
             previous = len(names) - 1
         last_link[b] = previous
     count = len(names)
@@ -184,7 +185,9 @@ def pose_model(fit: SequenceFit, fps: float) -> KinematicMotion:
     for j in range(1, count):
         local[:, j] = np.swapaxes(frames[:, parents[j]], -1, -2) @ frames[:, j]
     rotations = Rotation.from_matrix(local.reshape(-1, 3, 3)).as_quat().reshape(n, count, 4)
-    length = np.asarray(lengths)
+    length = np.array(
+        [0.0, *(np.linalg.norm(ends[j] - starts[j], axis=-1).mean() for j in range(1, count))]
+    )
     offsets = np.zeros((count, 3))
     for j in range(1, count):
         if parents[j] > 0:

@@ -32,11 +32,11 @@ MARGIN = 0.35
 JOINT_LIMIT_M = 0.25
 """Bound on the mean error of the 13 joints: 0.13 m measured (a 4 cm voxel grid, four
 cameras of 320x240)."""
-FIXED_LENGTH_REACH_M = 0.5
+FIXED_LENGTH_REACH_M = 0.15
 """How far (m) the BVH's joints may stray out of the capture volume: its links have
-the model's mean lengths, which carry limb ends past the measured ones (a foot 0.44 m
-below the floor here, where the legs part from the trunk at heights that vary over the
-take)."""
+the model's mean lengths, which carry limb ends past the measured ones in some frames
+(a foot 0.11 m below the floor here, 0.44 m when the links were as long as the curves
+between the joints)."""
 POLE = np.array([[-0.15, 0.0, -0.15], [0.15, 1.7, 0.15]])
 """Corners (m) of the box-shaped pole of the non-human take."""
 POLE_FRAMES = 10
