@@ -366,13 +366,13 @@ def _joint_peaks(matched: list[Branch]) -> np.ndarray:
 
 
 def _junction(peaks: np.ndarray, length: float, radius: float) -> tuple[np.ndarray, float]:
-    """The joint fractions (k,) of a carrying branch of `length` and `radius` (m) with
-    joints at `peaks` (k + 1 or k,), rescaled to where it ends, and that end (fraction
-    of its curve): at its last joint when within `JUNCTION` of the radius of the
-    branching node (which it then stands for), at the node (1) otherwise."""
+    """The joints (k,) of a carrying branch of `length` and `radius` (m) with joints at
+    `peaks` (k + 1 or k,) that lie before its end, and that end (fraction of its curve):
+    at its last joint when within `JUNCTION` of the radius of the branching node (which
+    it then stands for), at the node (1) otherwise."""
     if len(peaks) == 0 or (1.0 - peaks[-1]) * length >= JUNCTION * radius:
         return peaks, 1.0
-    return peaks[:-1] / peaks[-1], float(peaks[-1])
+    return peaks[:-1], float(peaks[-1])
 
 
 def _off_the_tip(peaks: np.ndarray, end: float, length: float, radius: float) -> np.ndarray:
