@@ -8,11 +8,12 @@ median of its first frames.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from export.humanoid import HumanoidRig
-from export.retarget import leg_length, local_rotations, rest_frames, root_positions
-from samba.kinematics import continuous_quaternions
+from export.humanoid import N_BONES, HumanoidRig
+from export.retarget import LIMBS, leg_length, rest_frames, root_positions, stream_rotations
 from samba.skeleton import N_JOINTS
 
 
@@ -50,7 +51,7 @@ class LiveRetarget:
     def reset(self) -> None:
         """Start a new stream: forget the bent frames, the quaternion signs and the
         estimated leg length (a leg length given to the constructor stays)."""
-        self._carried: np.ndarray | None = None
+        self._carried = np.full((LIMBS, 3, 2), np.nan)
         self._previous: np.ndarray | None = None
         self._settling: list[np.ndarray] = []
         self._leg_length = self._given_leg_length
@@ -70,17 +71,50 @@ class LiveRetarget:
         pose = np.array(pose, dtype=np.float64)
         if pose.shape != (N_JOINTS, 3):
             raise ValueError(f"LiveRetarget.step needs a pose of shape (13, 3), got {pose.shape}")
-        if not np.isfinite(pose).all():
-            raise ValueError("LiveRetarget.step needs a finite pose (drop frames with NaN first)")
-        rotations, _, self._carried = local_rotations(
-            pose[None], self._rig, self._rest_frames, self._carried
+        rotations, roots = retarget_together([self], pose[None])
+        return rotations[0], roots[0]
+
+
+def retarget_together(
+    streams: Sequence[LiveRetarget], poses: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The next captured pose of several streams of one rig in one batch: poses (s, 13, 3)
+    in meters, finite, row i for streams[i]. Returns what each `streams[i].step(poses[i])`
+    returns, stacked: rotations (s, 17, 4) and roots (s, 3). Streams whose rigs share
+    a rest pose go in one batch: the live service retargets the sessions whose frames
+    arrive together so, four poses for about the cost of one. `ValueError` when a
+    stream comes twice."""
+    poses = np.array(poses, dtype=np.float64)
+    if poses.ndim != 3 or poses.shape[1:] != (N_JOINTS, 3) or len(poses) != len(streams):
+        raise ValueError(
+            f"retargeting needs one pose (13, 3) per stream: {len(streams)} streams, "
+            f"poses of shape {poses.shape}"
         )
-        current = rotations[0]
-        if self._previous is not None:
-            current = continuous_quaternions(np.stack([self._previous, current]))[1]
-        self._previous = current
-        if self._given_leg_length is None and len(self._settling) < self._settle_frames:
-            self._settling.append(pose)
-            self._leg_length = leg_length(np.stack(self._settling))
-        root = root_positions(pose[None], self._rig, self._leg_length)[0]
-        return current.copy(), root
+    if not np.isfinite(poses).all():
+        raise ValueError("LiveRetarget.step needs a finite pose (drop frames with NaN first)")
+    if len({id(s) for s in streams}) != len(streams):
+        raise ValueError("streams retargeted together must be distinct")
+    rotations = np.empty((len(streams), N_BONES, 4))
+    rigs: dict[bytes, list[int]] = {}  # streams whose rigs have one rest pose
+    for i, stream in enumerate(streams):
+        rigs.setdefault(stream._rig.rest.tobytes(), []).append(i)
+    for rows in rigs.values():
+        first = streams[rows[0]]
+        carried = np.stack([streams[i]._carried for i in rows])
+        rotations[rows], carried = stream_rotations(
+            poses[rows], first._rig, first._rest_frames, carried
+        )
+        for row, i in enumerate(rows):
+            streams[i]._carried = carried[row]
+    roots = np.empty((len(streams), 3))
+    for i, stream in enumerate(streams):
+        if stream._previous is not None:
+            flip = np.sum(stream._previous * rotations[i], axis=-1) < 0
+            rotations[i, flip] *= -1.0
+        stream._previous = rotations[i].copy()
+        if stream._given_leg_length is None and len(stream._settling) < stream._settle_frames:
+            stream._settling.append(poses[i])
+            stream._leg_length = leg_length(np.stack(stream._settling))
+        assert stream._leg_length is not None
+        roots[i] = root_positions(poses[i][None], stream._rig, stream._leg_length)[0]
+    return rotations, roots

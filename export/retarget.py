@@ -78,6 +78,8 @@ _CAPTURED_JOINTS = np.array(list(CAPTURE_JOINT.values()))
 _TORSO_BONES = np.array([bone for bone, _, _ in _TORSO])
 _TORSO_PRIMARY = np.array([line for _, line, _ in _TORSO]).T
 _TORSO_SECONDARY = np.array([line for _, _, line in _TORSO]).T
+LIMBS = len(_LIMBS)
+"""Limbs whose bend axes retargeting carries from frame to frame (arms, legs)."""
 _UPPER, _LOWER, _END, _LIMB_PARENT = np.array([limb[:4] for limb in _LIMBS]).T
 _SEGMENTS = np.concatenate([_UPPER, _LOWER])
 """Limb bones framed by their segment and the limb's bend axis; `_SEGMENT_ENDS` end them."""
@@ -189,9 +191,29 @@ def local_rotations(
     if frames is None:
         frames = rest_frames(rig)
     world, bent, carried = _world_rotations(capture_points(poses), rig.rest, frames, carried)
+    return _local_quaternions(world), bent, carried
+
+
+def stream_rotations(
+    poses: np.ndarray, rig: HumanoidRig, frames: np.ndarray, carried: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """`local_rotations` of one frame each of several takes: poses (s, 13, 3) in meters,
+    row i the next frame of take i, whose limb axes so far are carried[i] (s, 4, 3, 2),
+    NaN where a limb has not been bent yet (a take starting here: all NaN). `frames` are
+    the rig's `rest_frames`. Returns the rotations (s, 17, 4) `local_rotations` gives
+    each take's frame, and the limb axes (s, 4, 3, 2) each take carries on. The live
+    service retargets the sessions whose frames arrive together so, in one batch."""
+    world, _, carried = _world_rotations(
+        capture_points(poses), rig.rest, frames, carried, streams=True
+    )
+    return _local_quaternions(world), carried
+
+
+def _local_quaternions(world: np.ndarray) -> np.ndarray:
+    """Local rotations (n, 17, 4) of the bones' world rotations (n, 17, 3, 3)."""
     local = world.copy()
     local[:, 1:] = world[:, _PARENTS[1:]].swapaxes(-1, -2) @ world[:, 1:]
-    return _quaternions(local), bent, carried
+    return _quaternions(local)
 
 
 def root_positions(poses: np.ndarray, rig: HumanoidRig, subject_leg_length: float) -> np.ndarray:
@@ -203,21 +225,37 @@ def root_positions(poses: np.ndarray, rig: HumanoidRig, subject_leg_length: floa
 
 
 def _world_rotations(
-    capture: np.ndarray, rest: np.ndarray, frames: np.ndarray, carried: np.ndarray | None
+    capture: np.ndarray,
+    rest: np.ndarray,
+    frames: np.ndarray,
+    carried: np.ndarray | None,
+    streams: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World rotations (n, 17, 3, 3) taking the rig's rest bones (`rest` (17, 3), its
     `rest_frames` `frames`) to the captured ones (n, 17, 3), whether each of `_LIMBS` is
-    fully bent (n, 4) bool, and the limb axes carried on (`_bend_axis`)."""
-    world = np.empty((len(capture), N_BONES, 3, 3))
+    fully bent (n, 4) bool, and the limb axes carried on (`_bend_axis`): (4, 3, 2) for
+    the n frames of one take, or with `streams` (n, 4, 3, 2) for one frame each of n takes
+    (`carried` (n, 4, 3, 2) then)."""
+    n = len(capture)
+    world = np.empty((n, N_BONES, 3, 3))
     world[:, _TORSO_BONES] = (
         _frame(_lines(capture, _TORSO_PRIMARY), _lines(capture, _TORSO_SECONDARY))
         @ frames[_TORSO_BONES]
     )
     segments = capture[:, _SEGMENT_ENDS] - capture[:, _SEGMENTS]  # upper ones, lower ones
     limbs = len(_LIMBS)
-    axes, bent, carried = _bend_axis(
-        segments[:, :limbs], segments[:, limbs:], world[:, _LIMB_PARENT], carried
-    )
+    upper, lower, parent = segments[:, :limbs], segments[:, limbs:], world[:, _LIMB_PARENT]
+    if streams:  # one frame of n takes: as one frame with every take's limbs side by side
+        axes, bent, carried = _bend_axis(
+            upper.reshape(1, -1, 3),
+            lower.reshape(1, -1, 3),
+            parent.reshape(1, -1, 3, 3),
+            None if carried is None else carried.reshape(-1, 3, 2),
+        )
+        axes, bent = axes.reshape(n, limbs, 3), bent.reshape(n, limbs)
+        carried = carried.reshape(n, limbs, 3, 2)
+    else:
+        axes, bent, carried = _bend_axis(upper, lower, parent, carried)
     spine, lateral = _spine_directions(
         world[:, 0], world[:, 2], capture[:, 3] - capture[:, 0], rest
     )
@@ -252,10 +290,11 @@ def _spine_directions(
 def _bend_axis(
     upper: np.ndarray, lower: np.ndarray, parent: np.ndarray, carried: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unit bend axes (n, 4, 3) of the `_LIMBS` with segments `upper`, `lower` (n, 4, 3)
-    over a take, which frames are fully bent (n, 4) bool (their plane alone gives the
-    axis), and the axes to carry on (4, 3, 2): each limb's direction and bend axis
-    (columns) in its parent's frame at its last bent frame, NaN where none yet.
+    """Unit bend axes (n, L, 3) of the `_LIMBS` with segments `upper`, `lower` (n, L, 3)
+    over a take, which frames are fully bent (n, L) bool (their plane alone gives the
+    axis), and the axes to carry on (L, 3, 2): each limb's direction and bend axis
+    (columns) in its parent's frame at its last bent frame, NaN where none yet. L is the
+    4 limbs, or a multiple of them: the limbs of several takes side by side.
 
     Where a limb is bent, the limb plane's normal. Where it is nearly straight, the axis
     of its last bent frame, carried along with its parent (`parent` (n, 4, 3, 3) world
@@ -275,11 +314,12 @@ def _bend_axis(
     # The limb direction and bend axis (columns) in the parent's frame, of the last bent
     # frame or else the reference ones, turned with the parent and swung onto the limb.
     in_parent = parent.swapaxes(-1, -2) @ np.stack([u, plane], axis=-1)
-    limbs = np.arange(len(_LIMBS))
+    limbs = np.arange(u.shape[1])
     kept = in_parent[np.maximum(last_bent, 0), limbs]
     if carried is None:
-        carried = np.full((len(_LIMBS), 3, 2), np.nan)
-    before = np.where(np.isnan(carried), _REFERENCE_AXES, carried)
+        carried = np.full((len(limbs), 3, 2), np.nan)
+    reference = np.tile(_REFERENCE_AXES, (len(limbs) // len(_LIMBS), 1, 1))
+    before = np.where(np.isnan(carried), reference, carried)
     moved = parent @ np.where((last_bent >= 0)[..., None, None], kept, before)
     fallback = _swing(_unit(moved[..., 0]), u, moved[..., 1])
     fallback = _unit(fallback - _dot(fallback, u) * u)

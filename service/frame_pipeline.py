@@ -9,6 +9,8 @@ reconstruction), retarget them to the avatar (`export.live_retarget`) and hand t
 bundles to the network. It holds all of a session's CPU work and none of its
 bookkeeping, so a server can run it beside its event loop in a worker process
 (`service.pipeline_workers`); `service.session.CaptureSession` keeps the rest.
+`process_together` computes one frame each of several sessions that share their pose
+index and method with one batched reconstruction and one batched retargeting.
 
 Times are wall-clock seconds (`time.time()`); a frame's latency runs from the arrival
 of its last packet to the moment its VMC bundles have been sent.
@@ -17,23 +19,23 @@ of its last packet to the moment its VMC bundles have been sent.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from db.index import PoseIndex
-from db.store import PoseStore
 from export.avatar_file import read_avatar_rig
 from export.humanoid import HumanoidRig
-from export.live_retarget import LiveRetarget
+from export.live_retarget import LiveRetarget, retarget_together
 from samba.calibration_file import read_calibration
 from samba.cross_view_labels import CrossViewSettings
 from samba.methods import method
-from samba.reconstruction import PoseEstimate
-from samba.skeleton import N_MARKERS, mirror_poses
+from samba.reconstruction import PoseEstimate, ReconstructionConfig, reconstruct_together
+from samba.skeleton import N_MARKERS
 from samba.stage_tracking import StageTracker
 from samba.triangulation import Triangulation
 from service.session_config import SessionConfig
+from service.session_indexes import SessionIndexes
 from service.vmc import VmcSender, frame_bundles, unity_values
 
 PREPARED_MISSING = 2
@@ -104,6 +106,11 @@ class AvatarStream:
         """Send the avatar in `pose` captured at `frame_time` (s); returns the VMC
         datagrams the network has refused so far."""
         rotations, root = self.retarget.step(pose)
+        return self.emit(rotations, root, frame_time)
+
+    def emit(self, rotations: np.ndarray, root: np.ndarray, frame_time: float) -> int:
+        """Send the avatar's retargeted local bone `rotations` (17, 4) (x, y, z, w) and
+        `root` (3,) m captured at `frame_time` (s); returns what `send` returns."""
         positions, unity_rotations = unity_values(root, rotations, self.rig)
         self.vmc.send(frame_bundles(positions, unity_rotations, frame_time - self.clock_zero))
         return sum(self.vmc.errors.values())
@@ -121,20 +128,16 @@ class FramePipeline:
     count seconds from `clock_zero` (wall clock, s).
     """
 
-    def __init__(self, config: SessionConfig, clock_zero: float) -> None:
+    def __init__(
+        self, config: SessionConfig, clock_zero: float, indexes: SessionIndexes | None = None
+    ) -> None:
         assert config.calibration is not None and config.database is not None
         self.config = config
         self.cameras = read_calibration(config.calibration)
         self._projections = self.cameras.projections
         chosen = method(config.method)
-        store = PoseStore.open(config.database)
-        index = store.index
-        if chosen.mirrored_database:
-            poses = np.asarray(store.poses)
-            index = PoseIndex.build(
-                np.concatenate([poses, mirror_poses(poses)]), scale_by_tibia=store.scale_by_tibia
-            )
-        self.reconstructor = chosen.build(index)
+        indexes = SessionIndexes() if indexes is None else indexes
+        self.reconstructor = chosen.build(indexes.index(config.database, chosen.mirrored_database))
         self.reconstructor.prepare(PREPARED_MISSING)
         self.avatar = AvatarStream(config, clock_zero)
         self._stage: StageTracker | None = None
@@ -148,9 +151,20 @@ class FramePipeline:
         """How many poses the reconstruction searches."""
         return len(self.reconstructor.source.poses)
 
+    @property
+    def reconstruction_key(self) -> tuple[int, ReconstructionConfig, type]:
+        """Equal for the pipelines whose frames `process_together` reconstructs in one
+        batch: same index object (`SessionIndexes`), method configuration and class."""
+        r = self.reconstructor
+        return id(r.source), r.config, type(r)
+
     def process(self, frame: CameraMarkers, frame_time: float, last_arrival: float) -> FrameOutput:
         """Compute one frame from the cameras' marker pixels `frame`, captured at
         `frame_time` and complete at `last_arrival` (s)."""
+        return process_together([(self, frame, frame_time, last_arrival)])[0]
+
+    def _observe(self, frame: CameraMarkers) -> _Observed:
+        """The frame's labels and triangulated markers."""
         searches = 0 if self._stage is None else self._stage.searches
         labels = self._label(frame)
         found_again = self._stage is not None and self._stage.searches > searches
@@ -159,11 +173,23 @@ class FramePipeline:
             self.cameras.undistort(labels),
             gate_px=self.config.gate_px or None,
         )
-        markers = views.points
-        estimate = self.reconstructor.step(markers)
-        errors = self.avatar.send(estimate.pose, frame_time)
+        return _Observed(labels, views.points, found_again)
+
+    def _send(
+        self,
+        observed: _Observed,
+        estimate: PoseEstimate,
+        retargeted: tuple[np.ndarray, np.ndarray],
+        frame_time: float,
+        last_arrival: float,
+    ) -> FrameOutput:
+        """Send the avatar of a reconstructed and `retargeted` frame (`AvatarStream.emit`);
+        its output."""
+        errors = self.avatar.emit(*retargeted, frame_time)
         latency = time.time() - last_arrival
-        return FrameOutput(labels, markers, estimate, latency, errors, found_again)
+        return FrameOutput(
+            observed.labels, observed.markers, estimate, latency, errors, observed.found_again
+        )
 
     def _label(self, frame: CameraMarkers) -> np.ndarray:
         """The labels (c, 8, 2) to triangulate: the nodes' (without `server_labels`, and
@@ -208,8 +234,47 @@ class PosePipeline:
         self.avatar.close()
 
 
-def open_pipeline(config: SessionConfig, clock_zero: float) -> FramePipeline | PosePipeline:
-    """The pipeline of a session's `input` kind."""
+@dataclass(frozen=True)
+class _Observed:
+    """A frame's `labels` (c, 8, 2) px, triangulated `markers` (8, 3) m and `found_again`
+    (see `FrameOutput`)."""
+
+    labels: np.ndarray
+    markers: np.ndarray
+    found_again: bool
+
+
+FrameJob = tuple[FramePipeline, CameraMarkers, float, float]
+"""A frame to compute: (pipeline, frame, frame_time, last_arrival) as `FramePipeline.process`
+takes them."""
+
+
+def process_together(jobs: Sequence[FrameJob]) -> list[FrameOutput]:
+    """Compute one frame each of distinct marker sessions whose pipelines share a
+    `reconstruction_key`, with the reconstructions in one batch
+    (`samba.reconstruction.reconstruct_together`) and the retargeting in another
+    (`export.live_retarget.retarget_together`): the same outputs as one at a time, four
+    frames for about twice the cost of one. Outputs come in the jobs' order; each
+    frame's latency runs to the moment its VMC bundles leave."""
+    observed = [pipeline._observe(frame) for pipeline, frame, _, _ in jobs]
+    result = reconstruct_together(
+        [pipeline.reconstructor for pipeline, _, _, _ in jobs],
+        np.stack([seen.markers for seen in observed]),
+    )
+    rotations, roots = retarget_together(
+        [pipeline.avatar.retarget for pipeline, _, _, _ in jobs], result.poses
+    )
+    return [
+        pipeline._send(seen, result.estimate(i), (rotations[i], roots[i]), t, last_arrival)
+        for i, ((pipeline, _, t, last_arrival), seen) in enumerate(zip(jobs, observed, strict=True))
+    ]
+
+
+def open_pipeline(
+    config: SessionConfig, clock_zero: float, indexes: SessionIndexes | None = None
+) -> FramePipeline | PosePipeline:
+    """The pipeline of a session's `input` kind; marker sessions take their pose index
+    from `indexes` (None: one of their own)."""
     if config.input == "poses":
         return PosePipeline(config, clock_zero)
-    return FramePipeline(config, clock_zero)
+    return FramePipeline(config, clock_zero, indexes)

@@ -4,13 +4,19 @@ Both runners take frames with `submit` and report each computed frame, in the or
 submission per session, as a `FrameDone` to the `deliver` callable given at
 construction:
 
-* `InlinePipelines` computes in the caller's thread, before `submit` returns;
+* `InlinePipelines` computes in the caller's thread, before `submit` returns (or at
+  the end of a `together()` block);
 * `WorkerPipelines` spreads the sessions over up to `workers` processes (a session
   always runs in the same process, its reconstruction carries state from frame to
   frame) and calls `deliver` from a reader thread per process as results come back;
   the server hands them to its event loop. The event loop then only reads datagrams,
   assembles frames and records, while the reconstruction of several sessions uses
   several cores — the Python interpreter runs one thread at a time.
+
+Frames submitted inside a runner's `together()` block are held to its end and computed
+together (`service.frame_pipeline.process_together`: one batch for the sessions that
+share their reconstruction, which sessions on one database do through the runner's
+`SessionIndexes`); the server wraps each read of its socket in one.
 
 A worker that dies is restarted and its sessions re-opened; each frame it had in
 flight is reported lost (a `FrameDone` with an `error`). A worker exits when its
@@ -24,7 +30,8 @@ import logging
 import multiprocessing
 import signal
 import threading
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Callable, Hashable, Iterator
 from concurrent.futures import Future
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -40,8 +47,10 @@ from service.frame_pipeline import (
     FramePipeline,
     PosePipeline,
     open_pipeline,
+    process_together,
 )
 from service.session_config import SessionConfig
+from service.session_indexes import SessionIndexes
 
 LOG = logging.getLogger(__name__)
 
@@ -58,6 +67,8 @@ class FrameDone:
 
 
 Deliver = Callable[[FrameDone], None]
+_Frame = tuple[str, int, FrameInput, float, float]
+"""A submitted frame: (session, sequence, values, frame_time, arrival)."""
 
 
 class InlinePipelines:
@@ -66,18 +77,42 @@ class InlinePipelines:
     def __init__(self, deliver: Deliver) -> None:
         self._deliver = deliver
         self._pipelines: dict[str, FramePipeline | PosePipeline] = {}
+        self._indexes = SessionIndexes()
+        self._held: list[_Frame] | None = None
 
     def open(self, config: SessionConfig, clock_zero: float) -> int:
         """Open the session's pipeline (`open_pipeline`); returns its database size."""
-        pipeline = open_pipeline(config, clock_zero)
+        pipeline = open_pipeline(config, clock_zero, self._indexes)
         self._pipelines[config.name] = pipeline
         return pipeline.database_poses
 
     def submit(
         self, session: str, sequence: int, values: FrameInput, frame_time: float, arrival: float
     ) -> None:
-        """Compute frame `sequence` of `session` now (`FramePipeline.process`)."""
-        self._deliver(_compute(self._pipelines, session, sequence, values, frame_time, arrival))
+        """Compute frame `sequence` of `session` now (`FramePipeline.process`), or at the
+        end of the `together` block it is submitted in."""
+        frame = (session, sequence, values, frame_time, arrival)
+        if self._held is not None:
+            self._held.append(frame)
+            return
+        for done in _compute(self._pipelines, [frame]):
+            self._deliver(done)
+
+    @contextlib.contextmanager
+    def together(self) -> Iterator[None]:
+        """Hold the frames submitted in the block and compute them together at its end:
+        those of sessions that share their reconstruction in one batch
+        (`service.frame_pipeline.process_together`)."""
+        if self._held is not None:
+            yield
+            return
+        self._held = []
+        try:
+            yield
+        finally:
+            held, self._held = self._held, None
+            for done in _compute(self._pipelines, held):
+                self._deliver(done)
 
     def close_session(self, session: str) -> None:
         """Close the session's pipeline."""
@@ -112,6 +147,7 @@ class WorkerPipelines:
         self._owner: dict[str, _Worker] = {}
         self._lock = threading.Lock()
         self._closing = False
+        self._held: dict[_Worker, list[_Frame]] | None = None
         self.restarts = 0
 
     def open(self, config: SessionConfig, clock_zero: float) -> int:
@@ -143,11 +179,36 @@ class WorkerPipelines:
             self._deliver(FrameDone(session, sequence, error="the session is not open"))
             return
         worker.in_flight[session, sequence] = None
+        frame = (session, sequence, values, frame_time, arrival)
+        if self._held is None:
+            self._send_frames(worker, [frame])
+        else:
+            self._held.setdefault(worker, []).append(frame)
+
+    @contextlib.contextmanager
+    def together(self) -> Iterator[None]:
+        """Hold the frames submitted in the block and send them at its end, one message
+        per worker, which computes them together: those of sessions that share their
+        reconstruction in one batch (`service.frame_pipeline.process_together`)."""
+        if self._held is not None:
+            yield
+            return
+        self._held = {}
         try:
-            worker.send(("frame", session, sequence, values, frame_time, arrival))
+            yield
+        finally:
+            held, self._held = self._held, None
+            for worker, frames in held.items():
+                self._send_frames(worker, frames)
+
+    def _send_frames(self, worker: _Worker, frames: list[_Frame]) -> None:
+        try:
+            worker.send(("frames", frames))
         except OSError as exc:
-            del worker.in_flight[session, sequence]
-            self._deliver(FrameDone(session, sequence, error=f"worker unavailable: {exc}"))
+            for session, sequence, *_ in frames:
+                if (session, sequence) in worker.in_flight:  # else reported with the worker
+                    del worker.in_flight[session, sequence]
+                    self._deliver(FrameDone(session, sequence, error=f"worker unavailable: {exc}"))
 
     def close_session(self, session: str) -> None:
         """Close the session's pipeline in its worker (its VMC socket with it)."""
@@ -278,22 +339,51 @@ class _Worker:
 
 
 def _compute(
-    pipelines: dict[str, FramePipeline | PosePipeline],
-    session: str,
-    sequence: int,
-    values: FrameInput,
-    frame_time: float,
-    arrival: float,
-) -> FrameDone:
-    pipeline = pipelines.get(session)
-    if pipeline is None:
-        return FrameDone(session, sequence, error="the session is not open")
-    try:
-        output = pipeline.process(values, frame_time, arrival)
-    except Exception as exc:  # a bug in one frame must not stop the session
-        LOG.exception("session %s: frame %d failed", session, sequence)
-        return FrameDone(session, sequence, error=f"{type(exc).__name__}: {exc}")
-    return FrameDone(session, sequence, output=output)
+    pipelines: dict[str, FramePipeline | PosePipeline], frames: list[_Frame]
+) -> list[FrameDone]:
+    """What became of each of `frames`, in order. The frames of marker sessions whose
+    pipelines share a `reconstruction_key` are computed together (`process_together`), a
+    session's second frame with the others' second frames, after its first; an exception
+    fails the frames computed with it, and the sessions go on."""
+    done: dict[int, FrameDone] = {}
+    groups: dict[Hashable, list[int]] = {}
+    seen: Counter[str] = Counter()
+    for i, (session, sequence, *_) in enumerate(frames):
+        pipeline = pipelines.get(session)
+        seen[session] += 1
+        if pipeline is None:
+            done[i] = FrameDone(session, sequence, error="the session is not open")
+        elif isinstance(pipeline, FramePipeline):
+            groups.setdefault((pipeline.reconstruction_key, seen[session]), []).append(i)
+        else:
+            groups[i] = [i]
+    for rows in groups.values():
+        try:
+            outputs = _outputs(pipelines, [frames[i] for i in rows])
+        except Exception as exc:  # a bug in one frame must not stop the session
+            sessions = sorted({frames[i][0] for i in rows})
+            LOG.exception("sessions %s: %d frames failed", ", ".join(sessions), len(rows))
+            for i in rows:
+                done[i] = FrameDone(
+                    frames[i][0], frames[i][1], error=f"{type(exc).__name__}: {exc}"
+                )
+        else:
+            for i, output in zip(rows, outputs, strict=True):
+                done[i] = FrameDone(frames[i][0], frames[i][1], output=output)
+    return [done[i] for i in range(len(frames))]
+
+
+def _outputs(
+    pipelines: dict[str, FramePipeline | PosePipeline], frames: list[_Frame]
+) -> list[FrameOutput]:
+    """The outputs of one group of `_compute`: a pose session's frame, or marker frames."""
+    first = pipelines[frames[0][0]]
+    if isinstance(first, PosePipeline):
+        _, _, pose, frame_time, arrival = frames[0]
+        return [first.process(pose, frame_time, arrival)]
+    return process_together(
+        [(pipelines[session], values, t, arrival) for session, _, values, t, arrival in frames]
+    )
 
 
 def _serve_pipelines(connection: Connection) -> None:
@@ -301,6 +391,7 @@ def _serve_pipelines(connection: Connection) -> None:
     pipe closes."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the server's to handle
     pipelines: dict[str, FramePipeline | PosePipeline] = {}
+    indexes = SessionIndexes()
     with threadpool_limits(1):
         try:
             while True:
@@ -309,14 +400,15 @@ def _serve_pipelines(connection: Connection) -> None:
                 except (EOFError, OSError):
                     return
                 kind = message[0]
-                if kind == "frame":
-                    done = _compute(pipelines, *message[1:])
-                    if done.output is not None:
-                        answer = ("frame", done.session, done.sequence, done.output)
-                    else:
-                        answer = ("failed", done.session, done.sequence, done.error)
+                if kind == "frames":
+                    answers = [
+                        ("frame", d.session, d.sequence, d.output)
+                        if d.output is not None
+                        else ("failed", d.session, d.sequence, d.error)
+                        for d in _compute(pipelines, message[1])
+                    ]
                 elif kind == "open":
-                    answer = _open(pipelines, *message[1:])
+                    answers = [_open(pipelines, indexes, *message[1:])]
                 elif kind == "close":
                     if message[1] in pipelines:
                         pipelines.pop(message[1]).close()
@@ -324,7 +416,8 @@ def _serve_pipelines(connection: Connection) -> None:
                 else:  # "stop"
                     return
                 try:
-                    connection.send(answer)
+                    for answer in answers:
+                        connection.send(answer)
                 except OSError:  # the server is gone
                     return
         finally:
@@ -333,10 +426,13 @@ def _serve_pipelines(connection: Connection) -> None:
 
 
 def _open(
-    pipelines: dict[str, FramePipeline | PosePipeline], config: SessionConfig, clock_zero: float
+    pipelines: dict[str, FramePipeline | PosePipeline],
+    indexes: SessionIndexes,
+    config: SessionConfig,
+    clock_zero: float,
 ) -> tuple[Any, ...]:
     try:
-        pipeline = open_pipeline(config, clock_zero)
+        pipeline = open_pipeline(config, clock_zero, indexes)
     except InputError as exc:
         return ("refused", config.name, exc.source, exc.problem, exc.line)
     except Exception as exc:

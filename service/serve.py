@@ -117,7 +117,7 @@ class LiveServer:
         )
         try:
             try:
-                self._udp = UdpInput(*self._udp_bind, self._on_datagram)
+                self._udp = UdpInput(*self._udp_bind, self._on_datagram, burst=self.server.together)
             except OSError as exc:
                 raise _bind_error("udp", self._udp_bind, "receive camera packets", exc) from exc
             self._udp.start()

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Iterable
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
@@ -121,10 +122,17 @@ class CaptureServer:
             return
         session.on_packet(packet, arrival)
 
+    def together(self) -> AbstractContextManager[None]:
+        """A block whose completed frames are computed together at its end (frames of
+        sessions that search one database in one batch, `pipelines.together`); wrap the
+        datagrams that arrived at once in it."""
+        return self.pipelines.together()
+
     def tick(self, now: float) -> None:
-        """Submit every session's frames whose wait ran out at `now` (s)."""
-        for session in list(self.sessions.values()):
-            session.on_timer(now)
+        """Submit every session's frames whose wait ran out at `now` (s), together."""
+        with self.together():
+            for session in list(self.sessions.values()):
+                session.on_timer(now)
 
     def deliver(self, done: FrameDone) -> None:
         """Pass a computed (or failed) frame to its session; a session that has been

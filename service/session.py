@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import re
 import time
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -52,6 +53,8 @@ class Pipelines(Protocol):
     def submit(
         self, session: str, sequence: int, values: FrameInput, frame_time: float, arrival: float
     ) -> None: ...
+
+    def together(self) -> AbstractContextManager[None]: ...
 
     def close_session(self, session: str) -> None: ...
 

@@ -4,7 +4,9 @@ The arrival time of a datagram is the kernel's receive timestamp (`SO_TIMESTAMPN
 wall clock, nanoseconds) where the platform has it (Linux), so time a datagram spends
 queued in the socket while the server is busy counts towards its frame's latency;
 elsewhere it is the time the datagram is read. Every datagram waiting in the socket is
-read per wake-up, up to `MAX_BATCH`, and handed to `handle(data, arrival_s, sender)`;
+read per wake-up, up to `MAX_BATCH`, and handed to `handle(data, arrival_s, sender)`,
+all inside one `burst()` block when one is given (the server computes the frames those
+datagrams complete together);
 datagrams longer than `max_bytes` arrive cut to `max_bytes + 1` bytes (camera packets:
 `decode` then drops them as too long).
 """
@@ -12,11 +14,13 @@ datagrams longer than `max_bytes` arrive cut to `max_bytes + 1` bytes (camera pa
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import socket
 import struct
 import sys
 import time
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 
 from service.packet import MAX_PACKET_BYTES
 
@@ -38,9 +42,15 @@ class UdpInput:
     """
 
     def __init__(
-        self, host: str, port: int, handle: Handler, max_bytes: int = MAX_PACKET_BYTES
+        self,
+        host: str,
+        port: int,
+        handle: Handler,
+        max_bytes: int = MAX_PACKET_BYTES,
+        burst: Callable[[], AbstractContextManager[None]] = contextlib.nullcontext,
     ) -> None:
         self._handle = handle
+        self._burst = burst
         self._buffer_bytes = max_bytes + 1
         self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
@@ -74,6 +84,10 @@ class UdpInput:
         self._socket.close()
 
     def _read(self) -> None:
+        with self._burst():
+            self._read_waiting()
+
+    def _read_waiting(self) -> None:
         ancillary = socket.CMSG_SPACE(_TIMESPEC.size) if self._kernel_time else 0
         for _ in range(MAX_BATCH):
             try:

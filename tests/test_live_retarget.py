@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from export.humanoid import HumanoidRig
-from export.live_retarget import LiveRetarget
+from export.live_retarget import LiveRetarget, retarget_together
 from export.retarget import leg_length, local_rotations, rest_frames, retarget
 from samba.skeleton import Body
 from samba.synthetic import generate
@@ -151,3 +151,34 @@ def test_bad_poses_are_rejected_without_disturbing_the_stream() -> None:
 def test_bad_settings_are_rejected(arguments: dict[str, float], problem: str) -> None:
     with pytest.raises(ValueError, match=problem):
         LiveRetarget(T_POSE, **arguments)
+
+
+def test_streams_retargeted_together_get_what_each_gets_alone() -> None:
+    """Four live sessions, two rigs, retargeted in one batch each frame (one starting
+    late): every stream's rotations and roots are the ones it gets on its own."""
+    takes = [
+        generate(kind, seed=5, seconds=2.0).poses for kind in ("walk", "kick", "squat", "turn")
+    ]
+    rigs = [T_POSE, A_POSE_SMALL, HumanoidRig.from_body(), A_POSE_SMALL]
+    alone = [stream(LiveRetarget(rig), take) for rig, take in zip(rigs, takes, strict=True)]
+    streams = [LiveRetarget(rig) for rig in rigs]
+    got: list[list[tuple[np.ndarray, np.ndarray]]] = [[] for _ in takes]
+    for f in range(len(takes[0])):
+        running = [i for i in range(len(takes)) if i != 3 or f >= 10]
+        poses = np.stack([takes[i][f if i != 3 else f - 10] for i in running])
+        rotations, roots = retarget_together([streams[i] for i in running], poses)
+        for row, i in enumerate(running):
+            got[i].append((rotations[row], roots[row]))
+    for (rotations, roots), frames in zip(alone, got, strict=True):
+        n = len(frames)
+        np.testing.assert_allclose(np.stack([q for q, _ in frames]), rotations[:n], atol=1e-12)
+        np.testing.assert_allclose(np.stack([r for _, r in frames]), roots[:n], atol=1e-12)
+
+
+def test_a_stream_retargeted_twice_in_one_batch_is_refused() -> None:
+    live = LiveRetarget(T_POSE)
+    pose = generate("walk", seed=1, seconds=1.0).poses[0]
+    with pytest.raises(ValueError, match="must be distinct"):
+        retarget_together([live, live], np.stack([pose, pose]))
+    with pytest.raises(ValueError, match="one pose"):
+        retarget_together([live], np.stack([pose, pose]))

@@ -13,10 +13,14 @@ import numpy as np
 import pytest
 from live_fixtures import config
 
+from db.store import PoseStore
+from db.synthetic_store import build_synthetic_store
 from samba.errors import InputError
+from samba.synthetic import generate
 from service.errors import ServiceError
 from service.frame_pipeline import CameraMarkers
 from service.pipeline_workers import FrameDone, InlinePipelines, WorkerPipelines
+from service.session_indexes import SessionIndexes
 from service.synthetic_capture import SyntheticCapture
 
 
@@ -66,6 +70,59 @@ def test_workers_give_the_poses_of_the_event_loop_in_order(
     here = np.array([d.output.estimate.pose for d in inline.done])
     there = np.array([d.output.estimate.pose for d in remote])
     np.testing.assert_array_equal(there, here)  # the same code, the same numbers
+
+
+@pytest.mark.parametrize("workers", [0, 1], ids=["in the event loop", "in a worker process"])
+def test_sessions_computed_together_get_the_poses_they_get_alone(
+    live_store: Path, live_calibration: Path, live_capture: SyntheticCapture, workers: int
+) -> None:
+    """Three sessions on one database whose frames arrive together (one starting 10
+    frames late), and a session that is not open: each open session gets, frame by frame
+    and in order, the poses it gets alone; the unknown one's frames fail, named."""
+    alone = Collected()
+    single = InlinePipelines(alone)
+    single.open(config(live_calibration, live_store), 0.0)
+    submit_all(single, live_capture)
+    single.shutdown()
+    expected = np.array([d.output.estimate.pose for d in alone.done])
+
+    collected = Collected()
+    pool = InlinePipelines(collected) if workers == 0 else WorkerPipelines(workers, collected)
+    starts = {"a": 0, "b": 0, "c": 10}
+    try:
+        for name in starts:
+            pool.open(config(live_calibration, live_store, name=name), 0.0)
+        for instant in range(live_capture.frames):
+            with pool.together():
+                for name, start in {**starts, "gone": 0}.items():
+                    if instant >= start:
+                        pixels = CameraMarkers.from_labels(live_capture.pixels[:, instant - start])
+                        pool.submit(name, instant - start, pixels, instant / 60.0, time.time())
+        total = 4 * live_capture.frames - 10
+        done = collected.wait_for(total)
+    finally:
+        pool.shutdown()
+    assert {d.error for d in done if d.session == "gone"} == {"the session is not open"}
+    for name, start in starts.items():
+        mine = [d for d in done if d.session == name]
+        assert [d.sequence for d in mine] == list(range(live_capture.frames - start))
+        poses = np.array([d.output.estimate.pose for d in mine])
+        np.testing.assert_allclose(poses, expected[: len(poses)], rtol=0, atol=1e-9)
+
+
+def test_sessions_share_the_index_of_one_database_snapshot(tmp_path: Path) -> None:
+    """One loaded index per store snapshot and kind: a second session on the same store
+    gets the same one, the mirrored kind another, and a store changed since a new one."""
+    path = tmp_path / "db"
+    build_synthetic_store(path, takes_per_motion=1, seconds=1.0, seed=3)
+    indexes = SessionIndexes()
+    first = indexes.index(path, mirrored=False)
+    assert indexes.index(path, mirrored=False) is first
+    mirrored = indexes.index(path, mirrored=True)
+    assert mirrored is not first and len(mirrored.poses) == 2 * len(first.poses)
+    PoseStore.open(path).add(generate("wave", seconds=1.0, seed=77))
+    changed = indexes.index(path, mirrored=False)
+    assert changed is not first and len(changed.poses) > len(first.poses)
 
 
 def test_sessions_spread_over_the_workers_and_a_bad_file_is_named(

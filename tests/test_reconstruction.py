@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 import db.index
 from db.index import PoseIndex
 from samba.methods import method
-from samba.reconstruction import Reconstruction, Reconstructor
+from samba.reconstruction import Reconstruction, Reconstructor, reconstruct_together
 from samba.skeleton import markers_of, mirror_poses, standard_pose
 from samba.synthetic import MOTIONS, generate, library
 
@@ -167,6 +167,44 @@ def test_live_path_equals_batch_path(reconstructors: dict[str, Reconstructor], n
     assert [e.markers_used for e in live] == batch.markers_used.tolist()
     assert [e.confident for e in live] == batch.confident.tolist()
     assert [e.predicted for e in live] == batch.predicted.tolist()
+
+
+@pytest.mark.parametrize("name", ["samba", "best", "nn"])
+def test_sessions_reconstructed_together_get_their_own_poses(
+    reconstructors: dict[str, Reconstructor], name: str
+) -> None:
+    """Three live sessions on one database, their frames in one batch each instant: every
+    session gets the poses it gets alone, its smoothness term from its own history, also
+    when one session loses its markers or starts later."""
+    motions = ["kick", "walk", "squat"]
+    takes = [_observe(motion, seed=600 + i)[1] for i, motion in enumerate(motions)]
+    takes[1][20:26] = np.nan  # the second session loses every marker for a while
+    source, config = reconstructors[name].source, reconstructors[name].config
+    alone = [type(reconstructors[name])(source, config) for _ in takes]
+    expected = [r.reconstruct(m) for r, m in zip(alone, takes, strict=True)]
+    sessions = [type(r)(source, config) for r in alone]
+    together: list[list[np.ndarray]] = [[], [], []]
+    for f in range(len(takes[0])):
+        running = [s for s in range(3) if not (s == 2 and f < 10)]  # the third starts late
+        frames = np.stack([takes[s][f if s != 2 else f - 10] for s in running])
+        result = reconstruct_together([sessions[s] for s in running], frames)
+        for row, s in enumerate(running):
+            together[s].append(result.estimate(row).pose)
+            assert result.estimate(row).predicted == (s == 1 and 20 <= f < 26)
+    for s in range(3):
+        got = np.stack(together[s])
+        assert np.abs(got - expected[s].poses[: len(got)]).max() < 1e-9
+
+
+def test_reconstructed_together_only_with_one_source_and_configuration(
+    reconstructors: dict[str, Reconstructor],
+) -> None:
+    samba, best = reconstructors["samba"], reconstructors["best"]
+    markers = np.repeat(markers_of(standard_pose())[None], 2, axis=0)
+    with pytest.raises(ValueError, match="share class, configuration and source"):
+        reconstruct_together([samba, best], markers)
+    with pytest.raises(ValueError, match="one frame per reconstructor"):
+        reconstruct_together([samba], markers)
 
 
 @pytest.mark.parametrize("name", ["samba", "best"])

@@ -63,6 +63,48 @@ def test_live_path_gives_the_offline_poses_and_streams_every_frame(
     assert stage["latency"]["count"] == live_capture.frames  # speed: bench/bench_service.py
 
 
+@pytest.mark.parametrize("workers", [0, 2], ids=["in the event loop", "in worker processes"])
+def test_sessions_whose_packets_arrive_together_each_get_the_offline_poses(
+    live_store: Path,
+    live_calibration: Path,
+    live_capture: SyntheticCapture,
+    tmp_path: Path,
+    workers: int,
+) -> None:
+    """Three stages on one database whose cameras share a trigger: every frame's six
+    packets leave at once, the server computes the three frames together, and each
+    session records the poses of the offline reconstruction."""
+    names = ("a", "b", "c")
+
+    async def run() -> dict:
+        cfgs = [config(live_calibration, live_store, name=n, wait_ms=200) for n in names]
+        bind = {"udp": ("127.0.0.1", 0), "http": None, "workers": workers}
+        async with LiveServer(cfgs, tmp_path / "takes", **bind) as live:
+            assert live.server is not None
+            sessions = [live.server.session(n) for n in names]
+            for session in sessions:
+                session.start_take("walk")
+            start = time.time() + 0.2
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+                for frame in range(live_capture.frames):
+                    await asyncio.sleep(max(0.0, start + frame / 60.0 - time.time()))
+                    for name in names:
+                        for camera in range(2):
+                            packet = live_capture.packet(camera, frame, start, name)
+                            sock.sendto(encode(packet), live.udp_address)
+            await until(lambda: all(s.frames_out == live_capture.frames for s in sessions))
+            for session in sessions:
+                session.stop_take()
+            return live.server.metrics()
+
+    metrics = asyncio.run(run())
+    expected = offline_poses(live_capture, live_store)
+    for name in names:
+        assert metrics["sessions"][name]["sync"]["complete"] == live_capture.frames
+        take = read_take(tmp_path / "takes" / name / "walk.mcap")
+        assert np.linalg.norm(take.poses - expected, axis=-1).max() < 0.001  # meters
+
+
 def test_signed_packets_and_bad_datagrams(
     live_store: Path, live_calibration: Path, live_capture: SyntheticCapture, tmp_path: Path
 ) -> None:
