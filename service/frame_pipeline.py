@@ -161,7 +161,10 @@ class FramePipeline:
     def process(self, frame: CameraMarkers, frame_time: float, last_arrival: float) -> FrameOutput:
         """Compute one frame from the cameras' marker pixels `frame`, captured at
         `frame_time` and complete at `last_arrival` (s)."""
-        return process_together([(self, frame, frame_time, last_arrival)])[0]
+        (output,) = process_together([(self, frame, frame_time, last_arrival)])
+        if isinstance(output, Exception):
+            raise output
+        return output
 
     def _observe(self, frame: CameraMarkers) -> _Observed:
         """The frame's labels and triangulated markers."""
@@ -249,25 +252,41 @@ FrameJob = tuple[FramePipeline, CameraMarkers, float, float]
 takes them."""
 
 
-def process_together(jobs: Sequence[FrameJob]) -> list[FrameOutput]:
+def process_together(jobs: Sequence[FrameJob]) -> list[FrameOutput | Exception]:
     """Compute one frame each of distinct marker sessions whose pipelines share a
     `reconstruction_key`, with the reconstructions in one batch
     (`samba.reconstruction.reconstruct_together`) and the retargeting in another
     (`export.live_retarget.retarget_together`): the same outputs as one at a time, four
     frames for about twice the cost of one. Outputs come in the jobs' order; each
-    frame's latency runs to the moment its VMC bundles leave."""
-    observed = [pipeline._observe(frame) for pipeline, frame, _, _ in jobs]
-    result = reconstruct_together(
-        [pipeline.reconstructor for pipeline, _, _, _ in jobs],
-        np.stack([seen.markers for seen in observed]),
-    )
-    rotations, roots = retarget_together(
-        [pipeline.avatar.retarget for pipeline, _, _, _ in jobs], result.poses
-    )
-    return [
-        pipeline._send(seen, result.estimate(i), (rotations[i], roots[i]), t, last_arrival)
-        for i, ((pipeline, _, t, last_arrival), seen) in enumerate(zip(jobs, observed, strict=True))
-    ]
+    frame's latency runs to the moment its VMC bundles leave. A frame whose own steps
+    (labelling, triangulation) raise comes back as the exception, and the others go on;
+    an exception in the batched steps propagates."""
+    outputs: dict[int, FrameOutput | Exception] = {}
+    kept: list[int] = []
+    observed: list[_Observed] = []
+    for i, (pipeline, frame, _, _) in enumerate(jobs):
+        try:
+            observed.append(pipeline._observe(frame))
+        except Exception as exc:  # this frame's input or labelling state alone
+            outputs[i] = exc
+        else:
+            kept.append(i)
+    if kept:
+        result = reconstruct_together(
+            [jobs[i][0].reconstructor for i in kept], np.stack([o.markers for o in observed])
+        )
+        retargets = [jobs[i][0].avatar.retarget for i in kept]
+        rotations, roots = retarget_together(retargets, result.poses)
+        for row, i in enumerate(kept):
+            pipeline, _, frame_time, last_arrival = jobs[i]
+            outputs[i] = pipeline._send(
+                observed[row],
+                result.estimate(row),
+                (rotations[row], roots[row]),
+                frame_time,
+                last_arrival,
+            )
+    return [outputs[i] for i in range(len(jobs))]
 
 
 def open_pipeline(

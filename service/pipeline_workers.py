@@ -343,8 +343,9 @@ def _compute(
 ) -> list[FrameDone]:
     """What became of each of `frames`, in order. The frames of marker sessions whose
     pipelines share a `reconstruction_key` are computed together (`process_together`), a
-    session's second frame with the others' second frames, after its first; an exception
-    fails the frames computed with it, and the sessions go on."""
+    session's second frame with the others' second frames, after its first. An exception
+    fails its frame (in a frame's own steps) or the frames computed with it (in the
+    batched steps), and the sessions go on."""
     done: dict[int, FrameDone] = {}
     groups: dict[Hashable, list[int]] = {}
     seen: Counter[str] = Counter()
@@ -369,13 +370,19 @@ def _compute(
                 )
         else:
             for i, output in zip(rows, outputs, strict=True):
-                done[i] = FrameDone(frames[i][0], frames[i][1], output=output)
+                session, sequence = frames[i][:2]
+                if isinstance(output, Exception):
+                    LOG.error("session %s: frame %d failed", session, sequence, exc_info=output)
+                    error = f"{type(output).__name__}: {output}"
+                    done[i] = FrameDone(session, sequence, error=error)
+                else:
+                    done[i] = FrameDone(session, sequence, output=output)
     return [done[i] for i in range(len(frames))]
 
 
 def _outputs(
     pipelines: dict[str, FramePipeline | PosePipeline], frames: list[_Frame]
-) -> list[FrameOutput]:
+) -> list[FrameOutput | Exception]:
     """The outputs of one group of `_compute`: a pose session's frame, or marker frames."""
     first = pipelines[frames[0][0]]
     if isinstance(first, PosePipeline):

@@ -110,6 +110,33 @@ def test_sessions_computed_together_get_the_poses_they_get_alone(
         np.testing.assert_allclose(poses, expected[: len(poses)], rtol=0, atol=1e-9)
 
 
+def test_a_frame_that_fails_alone_does_not_fail_the_frames_computed_with_it(
+    live_store: Path, live_calibration: Path, live_capture: SyntheticCapture
+) -> None:
+    """Session a's second frame has three cameras' labels for its two cameras: that frame
+    fails with the reason, b's frame computed with it and a's next frame come out."""
+    collected = Collected()
+    pool = InlinePipelines(collected)
+    try:
+        for name in "ab":
+            pool.open(config(live_calibration, live_store, name=name), 0.0)
+        for frame in range(3):
+            pixels = live_capture.pixels[:, frame]
+            broken = CameraMarkers.from_labels(np.concatenate([pixels, pixels[:1]]))
+            with pool.together():
+                for name in "ab":
+                    bad = name == "a" and frame == 1
+                    values = broken if bad else CameraMarkers.from_labels(pixels)
+                    pool.submit(name, frame, values, frame / 60.0, time.time())
+        done = collected.wait_for(6)
+    finally:
+        pool.shutdown()
+    failed = [(d.session, d.sequence) for d in done if d.error is not None]
+    assert failed == [("a", 1)]
+    assert "ValueError" in next(d.error for d in done if d.error is not None)
+    assert sum(d.output is not None for d in done) == 5
+
+
 def test_sessions_share_the_index_of_one_database_snapshot(tmp_path: Path) -> None:
     """One loaded index per store snapshot and kind: a second session on the same store
     gets the same one, the mirrored kind another, and a store changed since a new one."""
