@@ -141,9 +141,7 @@ class FramePipeline:
         self.reconstructor.prepare(PREPARED_MISSING)
         self.avatar = AvatarStream(config, clock_zero)
         self._stage: StageTracker | None = None
-        self.server_labels = config.labels == "server" or (
-            config.labels == "auto" and len(self.cameras) >= 3
-        )
+        self.server_labels = config.server_labels(len(self.cameras))
         """Whether the server finds the labels the nodes lost (`labels`)."""
 
     @property

@@ -23,6 +23,7 @@ from types import TracebackType
 
 from aiohttp import web
 
+from samba.calibration_file import read_calibration
 from service.control_api import add_control_routes, token_middleware
 from service.errors import ServiceError
 from service.pipeline_workers import FrameDone, WorkerPipelines
@@ -39,8 +40,24 @@ TIMER_SLACK_S = 0.0005
 """The frame timer fires this long after a deadline, so that a frame is surely due."""
 FLUSH_INTERVAL_S = 1.0
 """How often recording takes are flushed to the operating system, seconds."""
-DEFAULT_WORKERS = os.cpu_count() or 1
-"""Worker processes `samba serve` computes frames in by default: one per core."""
+CORES = os.cpu_count() or 1
+"""Worker processes `samba serve --workers auto` starts when it starts any: one per core."""
+
+
+def auto_workers(configs: Iterable[SessionConfig]) -> int:
+    """Worker processes for `samba serve --workers auto`: none when no session has the
+    server find lost labels (`SessionConfig.server_labels`; the frames are computed in
+    the event loop, those that arrive together in one batch: four sessions' p99 7.6-10 ms
+    against 11.6-16.5 ms in two workers, `bench/bench_service.py`), else one per core
+    (the server's labelling costs about 2 ms a frame per session, more than the event
+    loop can carry for four). Reads the sessions' calibration files (`InputError`
+    naming a bad one)."""
+    labelling = (
+        config.server_labels(len(read_calibration(config.calibration)))
+        for config in configs
+        if config.input == "markers" and config.calibration is not None
+    )
+    return CORES if any(labelling) else 0
 
 
 def is_loopback(host: str) -> bool:
@@ -102,6 +119,11 @@ class LiveServer:
         self._timer_due = float("inf")
         self._flusher: asyncio.Task[None] | None = None
         self.http_address: tuple[str, int] | None = None
+
+    @property
+    def workers(self) -> int:
+        """The worker processes computing frames (0: the event loop)."""
+        return self._workers
 
     async def start(self) -> None:
         """Open the sessions (in a worker thread) and the sockets, and start serving."""

@@ -15,7 +15,7 @@ from threadpoolctl import threadpool_limits
 from samba.cli_arguments import address, bind_address, natural, positive_float
 from samba.methods import METHODS
 from service.packet import read_key_file
-from service.serve import DEFAULT_WORKERS, HTTP_PORT, UDP_PORT, LiveServer
+from service.serve import CORES, HTTP_PORT, UDP_PORT, LiveServer, auto_workers
 from service.session import CaptureSession
 from service.session_config import INPUTS, LABELLERS, SessionConfig, read_sessions
 
@@ -81,10 +81,11 @@ def register(parser: argparse.ArgumentParser) -> None:
     net.add_argument("--key-file", help="shared HMAC key file; packets must then be signed")
     parser.add_argument(
         "--workers",
-        type=natural,
-        default=DEFAULT_WORKERS,
-        help="processes computing the frames, sessions spread over them (default: one per "
-        f"core, {DEFAULT_WORKERS} here; 0 = in the server's event loop)",
+        type=_workers,
+        default="auto",
+        help="processes computing the frames, sessions spread over them; 0 = in the "
+        "server's event loop; auto (default) = 0 when no session has the server find "
+        f"lost labels, else one per core ({CORES} here)",
     )
     parser.add_argument("--takes", default="takes", help="folder of recorded takes")
     parser.add_argument(
@@ -111,13 +112,18 @@ def run(args: argparse.Namespace) -> int:
         http=None if args.no_http else args.http,
         token=args.token or os.environ.get("SAMBA_TOKEN") or None,
         key=key,
-        workers=args.workers,
+        workers=auto_workers(configs) if args.workers == "auto" else args.workers,
     )
     # Per-frame linear algebra is on 39 x 39 matrices: BLAS threads only contend with
     # the event loop (and each other) for the cores.
     with threadpool_limits(1):
         asyncio.run(_serve(server, args.record, args.duration))
     return 0
+
+
+def _workers(text: str) -> int | str:
+    """`--workers`: "auto" or a count >= 0."""
+    return "auto" if text == "auto" else natural(text)
 
 
 def _configs(args: argparse.Namespace) -> list[SessionConfig]:
@@ -179,6 +185,10 @@ def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:
         take = s.recording
         if take is not None:
             print(f"    recording take {take.name} -> {take.path}")
+    if server.workers:
+        print(f"  frames computed in {server.workers} worker processes")
+    else:
+        print("  frames computed in the event loop, those that arrive together in one batch")
     if server.http_url:
         print(f"  control API: {server.http_url}/api/health (Ctrl-C stops)")
     sys.stdout.flush()

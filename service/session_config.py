@@ -93,6 +93,11 @@ class SessionConfig:
     input: str = "markers"
     labels: str = "auto"
 
+    def server_labels(self, cameras: int) -> bool:
+        """Whether the server finds the labels the nodes lost (`labels`) in a marker
+        session with `cameras` cameras."""
+        return self.labels == "server" or (self.labels == "auto" and cameras >= 3)
+
     @classmethod
     def from_mapping(
         cls, values: Mapping[str, Any], source: str, base: Path | None = None

@@ -18,9 +18,10 @@ from aiohttp import ClientSession
 from live_fixtures import VmcReceiver, config, offline_poses, until
 
 from ingest.mcap_take import read_take
+from samba.errors import InputError
 from service.errors import ServiceError
 from service.packet import encode
-from service.serve import LiveServer
+from service.serve import CORES, LiveServer, auto_workers
 from service.session_config import read_sessions
 from service.synthetic_capture import SyntheticCapture, play
 
@@ -270,6 +271,7 @@ def test_samba_serve_command(live_store: Path, live_calibration: Path, tmp_path:
     done = subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert done.returncode == 0, done.stderr
     assert f"camera packets on udp 127.0.0.1:{port}" in done.stdout
+    assert "frames computed in the event loop" in done.stdout  # --workers auto, 2 cameras
     assert "take first: 0 frames" in done.stdout
     assert "no latency: no frame came" in done.stdout
     assert (tmp_path / "takes" / "default" / "first.mcap").is_file()
@@ -296,6 +298,22 @@ def test_samba_serve_command(live_store: Path, live_calibration: Path, tmp_path:
     conflict = subprocess.run(both, capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert conflict.returncode == 2  # a flag conflict is a usage error
     assert "samba serve: error: give either --config or --calib/--db" in conflict.stderr
+
+
+def test_workers_start_only_where_the_server_labels(
+    live_store: Path, live_calibration: Path, tmp_path: Path
+) -> None:
+    """`--workers auto`: the event loop for sessions that keep their nodes' labels (two
+    cameras, or `labels = "nodes"`) and for pose sessions; one worker per core once a
+    session has the server find lost labels; a bad calibration is named."""
+    two = config(live_calibration, live_store)
+    poses = dataclasses.replace(two, name="mk", input="poses", calibration=None, database=None)
+    assert auto_workers([two, poses]) == 0
+    assert auto_workers([two, dataclasses.replace(two, name="b", labels="server")]) == CORES
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[cam_0]\nname = ")
+    with pytest.raises(InputError, match=r"broken\.toml"):
+        auto_workers([dataclasses.replace(two, calibration=broken)])
 
 
 def test_sessions_from_a_config_file(

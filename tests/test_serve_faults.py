@@ -206,6 +206,7 @@ def test_kill_9_mid_take_keeps_the_take_and_the_database(
         p: hashlib.sha256(p.read_bytes()).hexdigest() for p in live_store.rglob("*") if p.is_file()
     }
     args = ["--calib", str(live_calibration), "--db", str(live_store), "--takes", str(tmp_path)]
+    args += ["--workers", "2"]
     with serve_process(*args, "--record", "killed", "--session", "stage", http=False) as server:
         asyncio.run(play(live_capture, server.udp, time.time() + 0.2, "stage"))
         asyncio.run(play(live_capture, server.udp, time.time() + 0.1, "stage", sequence0=200))
