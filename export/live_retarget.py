@@ -82,8 +82,8 @@ def retarget_together(
     in meters, finite, row i for streams[i]. Returns what each `streams[i].step(poses[i])`
     returns, stacked: rotations (s, 17, 4) and roots (s, 3). Streams whose rigs share
     a rest pose go in one batch: the live service retargets the sessions whose frames
-    arrive together so, four poses for about the cost of one. `ValueError` when a
-    stream comes twice."""
+    arrive together so (the rotations of four poses cost about what one pose's do).
+    `ValueError` when a stream comes twice."""
     poses = np.array(poses, dtype=np.float64)
     if poses.ndim != 3 or poses.shape[1:] != (N_JOINTS, 3) or len(poses) != len(streams):
         raise ValueError(
