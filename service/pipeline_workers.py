@@ -33,9 +33,10 @@ import threading
 from collections import Counter
 from collections.abc import Callable, Hashable, Iterator
 from concurrent.futures import Future
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 from threadpoolctl import threadpool_limits
 
@@ -69,6 +70,35 @@ class FrameDone:
 Deliver = Callable[[FrameDone], None]
 _Frame = tuple[str, int, FrameInput, float, float]
 """A submitted frame: (session, sequence, values, frame_time, arrival)."""
+_Item = TypeVar("_Item")
+
+
+class _Hold(Generic[_Item]):
+    """Items held while a `block` runs and handed to `release` together when it ends."""
+
+    def __init__(self, release: Callable[[list[_Item]], None]) -> None:
+        self._release = release
+        self._items: list[_Item] | None = None
+
+    def keep(self, item: _Item) -> bool:
+        """Hold `item` while a block runs (True); False when none runs."""
+        if self._items is None:
+            return False
+        self._items.append(item)
+        return True
+
+    @contextlib.contextmanager
+    def block(self) -> Iterator[None]:
+        """Hold the items kept inside; a block inside another ends with the outer one."""
+        if self._items is not None:
+            yield
+            return
+        self._items = []
+        try:
+            yield
+        finally:
+            items, self._items = self._items, None
+            self._release(items)
 
 
 class InlinePipelines:
@@ -78,7 +108,7 @@ class InlinePipelines:
         self._deliver = deliver
         self._pipelines: dict[str, FramePipeline | PosePipeline] = {}
         self._indexes = SessionIndexes()
-        self._held: list[_Frame] | None = None
+        self._hold: _Hold[_Frame] = _Hold(self._deliver_computed)
 
     def open(self, config: SessionConfig, clock_zero: float) -> int:
         """Open the session's pipeline (`open_pipeline`); returns its database size."""
@@ -92,27 +122,18 @@ class InlinePipelines:
         """Compute frame `sequence` of `session` now (`FramePipeline.process`), or at the
         end of the `together` block it is submitted in."""
         frame = (session, sequence, values, frame_time, arrival)
-        if self._held is not None:
-            self._held.append(frame)
-            return
-        for done in _compute(self._pipelines, [frame]):
-            self._deliver(done)
+        if not self._hold.keep(frame):
+            self._deliver_computed([frame])
 
-    @contextlib.contextmanager
-    def together(self) -> Iterator[None]:
+    def together(self) -> AbstractContextManager[None]:
         """Hold the frames submitted in the block and compute them together at its end:
         those of sessions that share their reconstruction in one batch
         (`service.frame_pipeline.process_together`)."""
-        if self._held is not None:
-            yield
-            return
-        self._held = []
-        try:
-            yield
-        finally:
-            held, self._held = self._held, None
-            for done in _compute(self._pipelines, held):
-                self._deliver(done)
+        return self._hold.block()
+
+    def _deliver_computed(self, frames: list[_Frame]) -> None:
+        for done in _compute(self._pipelines, frames):
+            self._deliver(done)
 
     def close_session(self, session: str) -> None:
         """Close the session's pipeline."""
@@ -147,7 +168,7 @@ class WorkerPipelines:
         self._owner: dict[str, _Worker] = {}
         self._lock = threading.Lock()
         self._closing = False
-        self._held: dict[_Worker, list[_Frame]] | None = None
+        self._hold: _Hold[tuple[_Worker, _Frame]] = _Hold(self._send_held)
         self.restarts = 0
 
     def open(self, config: SessionConfig, clock_zero: float) -> int:
@@ -180,26 +201,21 @@ class WorkerPipelines:
             return
         worker.in_flight[session, sequence] = None
         frame = (session, sequence, values, frame_time, arrival)
-        if self._held is None:
+        if not self._hold.keep((worker, frame)):
             self._send_frames(worker, [frame])
-        else:
-            self._held.setdefault(worker, []).append(frame)
 
-    @contextlib.contextmanager
-    def together(self) -> Iterator[None]:
+    def together(self) -> AbstractContextManager[None]:
         """Hold the frames submitted in the block and send them at its end, one message
         per worker, which computes them together: those of sessions that share their
         reconstruction in one batch (`service.frame_pipeline.process_together`)."""
-        if self._held is not None:
-            yield
-            return
-        self._held = {}
-        try:
-            yield
-        finally:
-            held, self._held = self._held, None
-            for worker, frames in held.items():
-                self._send_frames(worker, frames)
+        return self._hold.block()
+
+    def _send_held(self, held: list[tuple[_Worker, _Frame]]) -> None:
+        frames: dict[_Worker, list[_Frame]] = {}
+        for worker, frame in held:
+            frames.setdefault(worker, []).append(frame)
+        for worker, mine in frames.items():
+            self._send_frames(worker, mine)
 
     def _send_frames(self, worker: _Worker, frames: list[_Frame]) -> None:
         try:
