@@ -124,10 +124,12 @@ class ShapeTree:
 
     def placed(self, leaves: np.ndarray, placement: Placement) -> np.ndarray:
         """The poses (k, 13, 3) float64 meters of `leaves` (k,) indices, moved on the floor
-        from the tree's home to where a silhouette with `placement` stands."""
-        shifts = placement.floor + self.leaves.floor_offsets[leaves] - self.view.home
-        shifts[:, 1] = 0.0
-        return self.leaves.poses[leaves].astype(np.float64) + shifts[:, None]
+        from the tree's home to where a silhouette with `placement` stands and scaled
+        about the floor point under their hip midpoint to the subject's size."""
+        roots = placement.floor + placement.size * self.leaves.floor_offsets[leaves]
+        roots[:, 1] = 0.0
+        at_home = self.leaves.poses[leaves].astype(np.float64) - self.view.home
+        return roots[:, None] + placement.size * at_home
 
     def children(self, level: int, nodes: np.ndarray) -> np.ndarray:
         """Indices on level `level + 1` of the children of `nodes` on level `level`."""

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from samba.body_model import scaled_to
+from samba.body_model import BodyModel, scaled_to
 from samba.shape_tree import ShapeTree
 from samba.silhouette_distance import DISTANCES
 from samba.silhouette_extraction import clean_silhouette, tracking_close_px
@@ -74,11 +74,15 @@ def staged(
 
 
 def observed_silhouettes(
-    poses: np.ndarray, tree: ShapeTree, noise: float, rng: np.random.Generator
+    poses: np.ndarray,
+    tree: ShapeTree,
+    noise: float,
+    rng: np.random.Generator,
+    subject: BodyModel | None = None,
 ) -> np.ndarray:
-    """What background subtraction would give of the tree's body model in `poses`
-    (n, 13, 3) m, seen by the tree's camera: (n, H, W) bool."""
-    clean = render_silhouettes(poses, tree.view.camera, tree.body)
+    """What background subtraction would give of the body `subject` (default: the tree's
+    body model) in `poses` (n, 13, 3) m, seen by the tree's camera: (n, H, W) bool."""
+    clean = render_silhouettes(poses, tree.view.camera, subject or tree.body)
     close = tracking_close_px(clean.shape[2], tree.view.size[0])
     return np.stack([clean_silhouette(m, close) for m in noisy_silhouettes(clean, rng, noise)])
 
@@ -111,11 +115,15 @@ def track_take(
     settings: TrackerSettings | None = None,
     noise: float = 0.5,
     seed: int = 0,
+    subject: BodyModel | None = None,
+    height: float | None = None,
 ) -> TrackingResult:
-    """Track the silhouettes of staged `poses` (n, 13, 3) m with a fresh tracker on one
-    thread and score every frame against the truth."""
-    masks = observed_silhouettes(poses, tree, noise, np.random.default_rng(seed))
-    tracker = SilhouetteTracker(tree, settings)
+    """Track the silhouettes of staged `poses` (n, 13, 3) m of the body `subject`
+    (default: the tree's body model) with a fresh tracker on one thread, told the
+    subject's stature `height` m (default: none, the tree's body model's), and score
+    every frame against the truth."""
+    masks = observed_silhouettes(poses, tree, noise, np.random.default_rng(seed), subject)
+    tracker = SilhouetteTracker(tree, settings, height)
     estimates, seconds = [], []
     with threadpool_limits(1):
         for mask in masks:
@@ -167,10 +175,11 @@ def arm_swing_experiment(
 ) -> list[ArmSwingOutcome]:
     """The paper's Figure 4 experiment: `sequences` held-out arm swings seen from the
     side (every other one from its right), where the far arm passes behind the body,
-    tracked with each distance of `DISTANCES` (one-sided, as the paper's) and the
-    paper's first-order motion models, plain (m = 1) and occlusion-aware (m = 5); then
-    with our default settings (the normalised distance made symmetric on the best
-    leaves, m = 5 and the velocity of the last step) for comparison."""
+    tracked with each distance of `DISTANCES` (one-sided and without the top-row term,
+    as the paper's) and the paper's first-order motion models, plain (m = 1) and
+    occlusion-aware (m = 5); then with our default settings (the normalised distance
+    made symmetric on the best leaves, the top-row term, m = 5 and the velocity of the
+    last step) for comparison."""
     takes = [
         staged(
             generate("arm_swing", seconds, fps, seed + k).poses.astype(np.float64),
@@ -182,7 +191,9 @@ def arm_swing_experiment(
     ]
     outcomes = []
     paper = [
-        TrackerSettings(distance=d, occlusion_factor=m, velocity_gain=0.0, symmetric_leaves=0)
+        TrackerSettings(
+            distance=d, occlusion_factor=m, velocity_gain=0.0, symmetric_leaves=0, top_sigma=0.0
+        )
         for d in DISTANCES
         for m in (1.0, 5.0)
     ]

@@ -125,6 +125,14 @@ class SilhouetteRuns:
         masks.reshape(-1)[run_pixels(first, self.ends - self.starts)] = True
         return np.ascontiguousarray(masks[:, :, :width])
 
+    def top_rows(self) -> np.ndarray:
+        """The first image row (m,) int64 each silhouette covers (H for an empty one)."""
+        width, height = self.size
+        tops = np.full(len(self), height, dtype=np.int64)
+        nonempty = self.offsets[1:] > self.offsets[:-1]
+        tops[nonempty] = self.starts[self.offsets[:-1][nonempty]] // (width + 1)
+        return tops
+
     def distances(self, sums: RowSums, indices: np.ndarray | None = None) -> np.ndarray:
         """Weighted XOR distances (k,) of the silhouettes at `indices` (default: all) to
         the observed silhouette whose weights `sums` holds, as

@@ -47,6 +47,17 @@ previous leaf (its visible fraction below `occluded_below`) gets `occlusion_fact
 times its standard deviation (the paper's m = 5), so it is free to jump to where it
 reappears. `occlusion_factor` = 1 is the plain model (the paper's DM1).
 
+Beyond the paper's likelihood, a leaf's score also has a Gaussian term (sigma `top_sigma`
+pixels) in the difference between its top row and the observed silhouette's in the
+normalised image: how tall the subject looks above the floor point where it stands, once
+scaled to the body model's stature (the subject's is given to the tracker). The core-
+weighted distances charge little for an outline moved a few pixels, so a leaf with the
+feet together, placed at the front foot of a stride (half a step too near the camera,
+hence a tenth bigger after normalising), covered the observed silhouette at little cost:
+its head stood 4-7 pixels above the observed one. The term took walking from 7.3 cm / 6.7%
+failures to 6.1 cm / 1.4% and 7.7 cm / 7.2% to 6.2 cm / 1.4% on two sets of held-out
+takes (bench_silhouette).
+
 A silhouette looks the same from the front and from the back, so the first frame (and
 the first after `reset`) needs a hint: it only considers poses whose front is within
 `start_tolerance` degrees of facing the camera (the player faces the screen when the
@@ -112,6 +123,8 @@ class TrackerSettings:
     `symmetric_leaves`: the best this many leaves are scored again with the symmetric
     distance (module docstring); 0 keeps the paper's one-sided distance.
     `leaf_side_weight` (> 0): the weight of the leaf's side of the symmetric distance.
+    `top_sigma` (pixels of the 320-pixel-wide level, >= 0): sigma of the leaves' top-row
+    term (module docstring); 0 leaves it out (the paper's likelihood).
     """
 
     distance: str = "normalised"
@@ -130,6 +143,7 @@ class TrackerSettings:
     mean_temperature: float = 3.0
     symmetric_leaves: int = 45
     leaf_side_weight: float = 3.0
+    top_sigma: float = 1.0
 
     def __post_init__(self) -> None:
         if self.distance not in DISTANCES:
@@ -164,6 +178,8 @@ class TrackerSettings:
             raise InputError(
                 "leaf_side_weight", f"must be finite and > 0, got {self.leaf_side_weight}"
             )
+        if not (np.isfinite(self.top_sigma) and self.top_sigma >= 0):
+            raise InputError("top_sigma", f"must be finite and >= 0, got {self.top_sigma}")
         if not (self.relative_sigma > 0 and 0 <= self.start_tolerance <= 180):
             raise InputError("relative_sigma", "must be > 0 (start_tolerance in 0..180)")
 
@@ -185,11 +201,27 @@ class SilhouetteEstimate:
 
 
 class SilhouetteTracker:
-    """Tracks one subject through silhouettes of `tree.view` (see the module docstring)."""
+    """Tracks one subject through silhouettes of `tree.view` (see the module docstring).
 
-    def __init__(self, tree: ShapeTree, settings: TrackerSettings | None = None) -> None:
+    `height` is the subject's stature in meters (default: the tree's body model's): the
+    observed silhouettes are scaled to the model's stature and the poses back to the
+    subject's. `InputError` for a stature outside 0.5..2.5 m.
+    """
+
+    def __init__(
+        self,
+        tree: ShapeTree,
+        settings: TrackerSettings | None = None,
+        height: float | None = None,
+    ) -> None:
         self.tree = tree
         self.settings = settings or TrackerSettings()
+        if height is None:
+            height = tree.body.height
+        if not 0.5 <= height <= 2.5:
+            raise InputError("height", f"the subject's stature must be 0.5..2.5 m, got {height}")
+        self.size = height / tree.body.height
+        self._tops = tree.levels[-1].silhouettes.top_rows()
         self._features = _part_features(tree.leaves.poses)
         away = np.abs(_facing_angles(tree.leaves.poses, tree.view.camera.center))
         self._turned_away = [away > self.settings.start_tolerance]
@@ -221,7 +253,8 @@ class SilhouetteTracker:
             )
         if not mask.any():
             return self._hold(mask)
-        normalised, placement = self.tree.view.normalise(mask)
+        normalised, placement = self.tree.view.normalise(mask, self.size)
+        top = int(np.argmax(normalised.any(axis=1)))
         settings = self.settings
         held = self._held_ancestors()
         nodes = np.arange(len(self.tree.levels[0]))
@@ -235,17 +268,19 @@ class SilhouetteTracker:
             distances = tree_level.silhouettes.distances(RowSums.from_weights(weights), nodes)
             evaluated += len(nodes)
             leaves = level == len(LEVEL_SIZES) - 1
-            prior = np.zeros(len(nodes))
+            prior = np.zeros(len(nodes))  # with the top-row term on the leaves
             if self._previous is None:
                 prior[self._turned_away[level][nodes]] = -np.inf
             elif leaves:
                 prior = self._log_prior(nodes)
+            if leaves:
+                prior = prior + self._log_top_term(nodes, top)
             scores = prior + self._log_likelihood(distances, size[0], leaves)
             if leaves and settings.symmetric_leaves:
-                top = np.argsort(scores)[::-1][: settings.symmetric_leaves]
-                nodes, prior = nodes[top], prior[top]
+                best = np.argsort(scores)[::-1][: settings.symmetric_leaves]
+                nodes, prior = nodes[best], prior[best]
                 masks = tree_level.silhouettes.subset(nodes).to_masks()
-                distances = distances[top] + settings.leaf_side_weight * model_weighted_distances(
+                distances = distances[best] + settings.leaf_side_weight * model_weighted_distances(
                     masks, image, "xor" if settings.distance == "xor" else "core"
                 )
                 scores = prior + self._log_likelihood(distances, size[0], leaves)
@@ -283,6 +318,14 @@ class SilhouetteTracker:
         if not leaves:
             sigma *= settings.upper_sigma_factor
         return -0.5 * (distances / sigma) ** 2
+
+    def _log_top_term(self, leaves: np.ndarray, top: int) -> np.ndarray:
+        """The top-row term (k,) of `leaves` (indices) against the observed normalised
+        silhouette's top row `top`; zeros when `top_sigma` is 0."""
+        sigma = self.settings.top_sigma
+        if sigma == 0:
+            return np.zeros(len(leaves))
+        return -0.5 * ((self._tops[leaves] - top) / sigma) ** 2
 
     def _held_ancestors(self) -> list[np.ndarray]:
         """Per upper level, the nodes (sorted indices) above the previous posterior's

@@ -11,10 +11,13 @@ computed from the silhouette alone, so that both go through exactly the same ste
   is where the feet meet the floor;
 * the anchor moves to the home point's pixel, and the image scales about it by the depth
   of the anchor's floor point over the home depth (a subject twice as far away looks
-  half as big).
+  half as big), and by the body model's stature over the subject's when they differ
+  (the tree's silhouettes are the model's: a subject 2% taller than it is brought to
+  its size).
 
 The anchor's floor point is where the subject stands: the tracker turns a tree pose
-(rendered at home) into a world pose by moving it there (`Placement.floor`).
+(rendered at home) into a world pose by moving it there (`Placement.floor`) and scaling
+it to the subject's stature (`Placement.size`).
 
 Pixels follow the OpenCV convention of `samba.camera.Camera`; world coordinates are
 meters, +Y up, the floor at y = 0.
@@ -47,11 +50,13 @@ HOME_DISTANCE = 3.0
 @dataclass(frozen=True)
 class Placement:
     """Where a silhouette stands: its `anchor` (2,) in pixels, the `scale` that brings it
-    to the home depth, and the `floor` point (3,) in meters under the anchor."""
+    to the home depth and the body model's size, the `floor` point (3,) in meters under
+    the anchor, and the subject's `size`: its stature over the body model's."""
 
     anchor: np.ndarray
     scale: float
     floor: np.ndarray
+    size: float = 1.0
 
 
 class SilhouetteView:
@@ -100,10 +105,13 @@ class SilhouetteView:
         t = np.where(t > 0, t, np.nan)
         return centre + rays * t[..., None]
 
-    def placement(self, mask: np.ndarray) -> Placement:
+    def placement(self, mask: np.ndarray, size: float = 1.0) -> Placement:
         """The anchor, scale and floor point of a silhouette `mask` (H, W) bool of the
-        view's size; `InputError` for an empty mask or one whose feet are above the
-        horizon."""
+        view's size, of a subject `size` times as tall as the body model; `InputError`
+        for an empty mask, one whose feet are above the horizon, or a size that is not a
+        positive number."""
+        if not (np.isfinite(size) and size > 0):
+            raise InputError("size", f"the subject's size must be > 0, got {size}")
         mask = self._check(mask)
         rows = np.flatnonzero(mask.any(axis=1))
         columns = np.flatnonzero(mask.any(axis=0))
@@ -115,12 +123,12 @@ class SilhouetteView:
         depth = float(self.camera.to_camera(floor)[2])
         if not depth > 0:
             raise InputError("silhouette", "its lowest point is above the horizon")
-        return Placement(anchor, depth / self.home_depth, floor)
+        return Placement(anchor, depth / self.home_depth / size, floor, size)
 
-    def normalise(self, mask: np.ndarray) -> tuple[np.ndarray, Placement]:
+    def normalise(self, mask: np.ndarray, size: float = 1.0) -> tuple[np.ndarray, Placement]:
         """`mask` (H, W) bool moved and scaled into the normalised frame, with its
-        placement."""
-        placement = self.placement(mask)
+        placement; `size` is the subject's stature over the body model's."""
+        placement = self.placement(mask, size)
         s = placement.scale
         shift = self.home_pixel - s * placement.anchor
         warp = np.array([[s, 0.0, shift[0]], [0.0, s, shift[1]]])

@@ -197,7 +197,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="markers (default) or silhouette: markerless, one camera, pose packets",
     )
     markerless = parser.add_argument_group(
-        "silhouette mode (the subject's --height picks the body model)"
+        "silhouette mode (the subject's --height picks the body model, and a video's or "
+        "webcam's subject is tracked at that stature)"
     )
     markerless.add_argument("--db", metavar="STORE", help="pose store holding the shape tree")
     markerless.add_argument("--tree", help="shape tree name in the store (default CAMERA-BODY)")
@@ -344,7 +345,8 @@ def _open_silhouette_source(
         empty = [frame for _, frame in open_frames(args.background).frames()]
     else:
         empty = [capture.frame for capture in itertools.islice(captures, args.empty_frames)]
-    return SilhouetteNode(tree, SilhouetteExtractor.for_tracking(empty, view.size[0])), captures
+    extractor = SilhouetteExtractor.for_tracking(empty, view.size[0])
+    return SilhouetteNode(tree, extractor, args.height), captures
 
 
 def _camera_id(text: str) -> int:

@@ -33,19 +33,22 @@ from service.node import Capture, grid_captures
 class SilhouetteNode:
     """Frames (H, W, 3) uint8 BGR of the tree's camera -> poses (13, 3) world meters.
 
-    `extractor` was learnt from the empty stage seen by the same camera. `process`
-    returns None until the subject is first seen; after that a frame without a
-    silhouette holds the last pose.
+    `extractor` was learnt from the empty stage seen by the same camera; `height` is the
+    subject's stature in meters (default: the tree's body model's). `process` returns
+    None until the subject is first seen; after that a frame without a silhouette holds
+    the last pose.
     """
 
     MISSING = "frames without a pose"
     """What `NodeSummary.missing_rate` counts for this node: frames before the subject
     was first seen."""
 
-    def __init__(self, tree: ShapeTree, extractor: SilhouetteExtractor) -> None:
+    def __init__(
+        self, tree: ShapeTree, extractor: SilhouetteExtractor, height: float | None = None
+    ) -> None:
         self.tree = tree
         self.extractor = extractor
-        self._tracker = SilhouetteTracker(tree)
+        self._tracker = SilhouetteTracker(tree, height=height)
         self._seen = False
 
     def restart(self) -> None:

@@ -77,8 +77,9 @@ def run(args: argparse.Namespace) -> int:
         stage = args.background or f"{args.video} (--empty-frames)"
         raise InputError(stage, exc.problem) from None
     tree = tree_for(args.db, args.tree, view, chosen_body(args))
+    tracker = SilhouetteTracker(tree, height=args.height)
     try:
-        seconds, held = _track(frames, extractor, SilhouetteTracker(tree), out, args)
+        seconds, held = _track(frames, extractor, tracker, out, args)
     except BaseException:
         out.unlink(missing_ok=True)
         raise

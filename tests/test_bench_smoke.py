@@ -96,6 +96,8 @@ def test_silhouette_benchmark_prints_accuracy_figure_4_and_speed(
     assert "1. Accuracy on held-out takes" in out and "2. Figure 4" in out
     (row,) = tables["accuracy"]
     assert row[:2] == [0.5, "wave"] and all(isinstance(v, float) for v in row[2:])
+    assert [r[:2] for r in tables["stature"]] == [[0.96, "wave"], [1.04, "wave"]]
+    assert "1b. A subject shorter or taller" in out
     assert len(tables["figure4"]) == 7 and {r[3] + r[4] + r[5] for r in tables["figure4"]} == {1}
     tree, _ = bench_silhouette.synthetic_tree(1)
     tracked, scanned = bench_silhouette.speed(tree, 1)

@@ -63,14 +63,15 @@ def test_staged_takes_face_the_camera_from_home_at_the_body_height() -> None:
 
 @pytest.mark.parametrize(
     ("motion", "seed"),
-    [("golf_swing", 912), ("point", 918), ("wave", 924), ("jumping_jacks", 936)],
+    [("walk", 900), ("golf_swing", 912), ("point", 918), ("wave", 924), ("jumping_jacks", 936)],
 )
 def test_frontal_motions_are_tracked_within_8_cm_by_the_posterior_mean(
     tree: ShapeTree, motion: str, seed: int
 ) -> None:
-    # The bench's first held-out take of the motion, facing the camera, silhouettes
-    # spoilt at level 0.5.
-    poses = staged(generate(motion, 4.0, 15.0, seed).poses.astype(np.float64), tree.view, 1.75)
+    # The bench's first held-out take of the motion, facing the camera (walking on the
+    # spot), silhouettes spoilt at level 0.5.
+    take = generate(motion, 4.0, 15.0, seed).poses.astype(np.float64)
+    poses = staged(take, tree.view, 1.75, in_place=motion == "walk")
     mean = track_take(motion, poses, tree, noise=0.5)
     best_leaf = track_take(motion, poses, tree, TrackerSettings(mean_temperature=0.0), 0.5)
     assert mean.mpjpe <= 8.0 and mean.failure_rate <= 0.05, (mean.mpjpe, mean.failure_rate)
@@ -83,7 +84,8 @@ def test_a_badly_spoilt_frame_does_not_lose_the_track(
     # A golfer bent towards the camera at address; in frame 2 the spoilt silhouette
     # closes the gap between the legs, and on the tree's upper levels a subject standing,
     # or bent away with the back turned, matches it better. Pruning keeps the subtrees of
-    # the last posterior, so the prior holds the track.
+    # the last posterior, so the prior holds the track; without that, frame 2 is lost
+    # (21 cm; three of frames 2-5 before the top-row term, which finds it again).
     poses = staged(
         generate("golf_swing", 4.0, 15.0, 2012).poses.astype(np.float64), tree.view, 1.75
     )
@@ -91,8 +93,7 @@ def test_a_badly_spoilt_frame_does_not_lose_the_track(
     assert held.errors.mean(axis=1).max() < 8.0, held.errors.mean(axis=1)
     monkeypatch.setattr(SilhouetteTracker, "_held_ancestors", lambda self: [])
     lost = track_take("golf_swing", poses[:6], tree, noise=0.5, seed=12)
-    failed = lost.errors.mean(axis=1)[2:] > 15.0  # at least three of frames 2-5
-    assert failed.sum() >= 3, lost.errors.mean(axis=1)
+    assert lost.errors.mean(axis=1)[2] > 15.0, lost.errors.mean(axis=1)
 
 
 def test_a_subject_turning_all_round_is_followed_past_the_side_view(tree: ShapeTree) -> None:
@@ -104,3 +105,38 @@ def test_a_subject_turning_all_round_is_followed_past_the_side_view(tree: ShapeT
     assert followed.mpjpe <= 8.0 and followed.failure_rate <= 0.05, followed.mpjpe
     one_sided = track_take("turn", poses, tree, TrackerSettings(symmetric_leaves=0), 0.5, 6)
     assert one_sided.mpjpe > 12.0 and one_sided.failure_rate > 0.2, one_sided.mpjpe
+
+
+def test_a_walker_is_placed_in_depth_by_how_tall_the_silhouette_looks(tree: ShapeTree) -> None:
+    # The bench's first held-out walk on the spot. A leaf with the feet together, placed
+    # at the front foot of a stride, stands half a step too near the camera and looks a
+    # tenth too big once normalised; the distances barely charge it, the top-row term
+    # does (0% failures against 18% without it).
+    take = generate("walk", 4.0, 15.0, 900).poses.astype(np.float64)
+    poses = staged(take, tree.view, 1.75, in_place=True)
+    tracked = track_take("walk", poses, tree, noise=0.5)
+    assert tracked.mpjpe <= 7.0 and tracked.failure_rate <= 0.05, tracked.mpjpe
+    without = track_take("walk", poses, tree, TrackerSettings(top_sigma=0.0), noise=0.5)
+    assert without.mpjpe > 8.0 and without.failure_rate > 0.1, without.mpjpe
+
+
+@pytest.mark.parametrize(
+    ("motion", "seed", "factor"), [("golf_swing", 912, 1.04), ("walk", 900, 0.96)]
+)
+def test_a_subject_taller_or_shorter_than_the_body_model_is_tracked_at_its_stature(
+    tree: ShapeTree, motion: str, seed: int, factor: float
+) -> None:
+    # A subject 4% taller (or shorter) than the nearest body model, the catalogue's step:
+    # told the subject's stature, the tracker scales the silhouettes to the model and the
+    # poses back (5.5 / 5.7 cm); not told, the size difference reads as depth and pose
+    # (11.0 cm, 13% failures / 16.9 cm, 62%).
+    b = tree.body
+    subject = BodyModel.from_girths(
+        "subject", b.kind, factor * b.height, factor * b.chest, factor * b.waist, factor * b.hip
+    )
+    take = generate(motion, 4.0, 15.0, seed).poses.astype(np.float64)
+    poses = staged(take, tree.view, subject.height, in_place=motion == "walk")
+    told = track_take(motion, poses, tree, noise=0.5, subject=subject, height=subject.height)
+    assert told.mpjpe <= 7.0 and told.failure_rate <= 0.05, told.mpjpe
+    not_told = track_take(motion, poses, tree, noise=0.5, subject=subject)
+    assert not_told.mpjpe > 9.0 and not_told.failure_rate > 0.1, not_told.mpjpe

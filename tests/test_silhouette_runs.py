@@ -51,6 +51,14 @@ def test_masks_round_trip_exactly(masks: np.ndarray) -> None:
     np.testing.assert_array_equal(runs.to_masks(), masks)
 
 
+def test_top_rows_are_each_silhouettes_first_row(masks: np.ndarray) -> None:
+    with_empty = np.concatenate([masks[:3], np.zeros_like(masks[:1]), masks[3:]])
+    tops = SilhouetteRuns.from_masks(with_empty).top_rows()
+    expected = [np.flatnonzero(m.any(axis=1))[0] if m.any() else m.shape[0] for m in with_empty]
+    np.testing.assert_array_equal(tops, expected)
+    assert tops[3] == with_empty.shape[1]  # an empty one: the image height
+
+
 def test_one_run_per_horizontal_stretch_of_foreground() -> None:
     mask = np.zeros((1, 4, 10), dtype=bool)
     mask[0, 0, 2:5] = True  # one run

@@ -13,7 +13,7 @@ from silhouette_fixtures import (
     source_poses,
 )
 
-from samba.body_model import PART_NAMES
+from samba.body_model import PART_NAMES, BodyModel
 from samba.errors import InputError
 from samba.shape_tree import PART_JOINTS, ShapeTree
 from samba.silhouette_distance import SilhouetteWeights
@@ -62,6 +62,8 @@ def _facing_leaves_of_take(tree: ShapeTree, sources: np.ndarray, take: int) -> n
         ("keep", (40, 0, 400)),
         ("leaf_side_weight", 0.0),
         ("leaf_side_weight", float("inf")),
+        ("top_sigma", -1.0),
+        ("top_sigma", float("nan")),
     ],
 )
 def test_settings_reject_bad_values(field: str, value: object) -> None:
@@ -147,6 +149,34 @@ def test_a_pose_beside_home_comes_back_in_world_coordinates(
         hips = estimate.pose[[7, 8]].mean(axis=0) - pose[[7, 8]].mean(axis=0)
         assert np.linalg.norm(hips) < 0.05  # m
         assert np.linalg.norm(estimate.pose - pose, axis=-1).mean() < 0.05  # m
+
+
+def test_a_taller_subject_comes_back_at_its_stature(
+    small_tree: ShapeTree, sources: np.ndarray
+) -> None:
+    # The wave's first camera-facing pose, its subject 5% taller than the body model and
+    # rendered so (the model scaled by 1.05): told the stature, the tracker finds the
+    # leaf and returns it 5% taller, standing where the subject stands.
+    leaf = _facing_leaves_of_take(small_tree, sources, 6)[0]
+    b = small_tree.body
+    taller = BodyModel.from_girths(
+        "tall", b.kind, 1.05 * b.height, 1.05 * b.chest, 1.05 * b.waist, 1.05 * b.hip
+    )
+    pose = small_tree.leaves.poses[leaf].astype(np.float64)
+    floor = pose[[7, 8]].mean(axis=0) * np.array([1.0, 0.0, 1.0])
+    truth = floor + 1.05 * (pose - floor)
+    mask = render_silhouettes(truth[None], small_tree.view.camera, taller)[0]
+    estimate = SilhouetteTracker(small_tree, height=taller.height).step(mask)
+    assert estimate.leaf == leaf
+    assert np.linalg.norm(estimate.pose - truth, axis=-1).mean() < 0.03  # m
+    unscaled = SilhouetteTracker(small_tree).step(mask)
+    assert np.linalg.norm(unscaled.pose - truth, axis=-1).mean() > 0.05  # m
+
+
+@pytest.mark.parametrize("height", [0.2, 3.0, float("nan")])
+def test_an_implausible_stature_raises(small_tree: ShapeTree, height: float) -> None:
+    with pytest.raises(InputError, match=r"height: the subject's stature must be 0\.5\.\.2\.5 m"):
+        SilhouetteTracker(small_tree, height=height)
 
 
 def test_the_first_frame_prefers_the_camera_facing_twin(

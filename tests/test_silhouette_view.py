@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from silhouette_fixtures import BODY, CAMERA, view
 
-from samba.body_model import ANKLE_HEIGHT_FRACTION
+from samba.body_model import ANKLE_HEIGHT_FRACTION, BodyModel
 from samba.camera import Camera
 from samba.errors import InputError
 from samba.silhouette_render import render_silhouettes
@@ -104,6 +104,30 @@ def test_a_subject_twice_as_far_normalises_to_the_same_size() -> None:
     assert far_mask.sum() == pytest.approx(near_mask.sum(), rel=0.1)
     assert _iou(near_mask, far_mask) > 0.8
     assert far_place.floor[2] - near_place.floor[2] == pytest.approx(-3.0, abs=0.05)
+
+
+def test_a_taller_subject_normalises_to_the_body_models_size() -> None:
+    # A subject 5% taller than the body model: told its size, the normalised frame
+    # brings it to the model's; its anchor and floor point do not change.
+    the_view = view()
+    model, _ = the_view.normalise(_silhouette((0.0, 0.0, 0.0)))
+    floor = STANDING[[7, 8]].mean(axis=0) * np.array([1.0, 0.0, 1.0])
+    taller = floor + 1.05 * (STANDING - floor)
+    b = BODY
+    big = BodyModel.from_girths(
+        "tall", b.kind, 1.05 * b.height, 1.05 * b.chest, 1.05 * b.waist, 1.05 * b.hip
+    )
+    mask = render_silhouettes(taller[None], the_view.camera, big)[0]
+    told, told_place = the_view.normalise(mask, 1.05)
+    as_is, place = the_view.normalise(mask)
+    assert _height(as_is) == pytest.approx(1.05 * _height(model), abs=2)
+    assert abs(_height(told) - _height(model)) <= 1
+    assert _iou(told, model) > _iou(as_is, model) + 0.03
+    assert told_place.scale == pytest.approx(place.scale / 1.05)
+    np.testing.assert_allclose(told_place.floor, place.floor)
+    assert (told_place.size, place.size) == (1.05, 1.0)
+    with pytest.raises(InputError, match="size: the subject's size must be > 0"):
+        the_view.normalise(mask, 0.0)
 
 
 def test_the_anchor_is_the_trunk_column_over_the_lowest_pixel() -> None:

@@ -338,3 +338,22 @@ def test_a_video_nobody_walks_into_leaves_no_take(stage: Stage, tmp_path: Path) 
     out = tmp_path / "wave.mcap"
     assert track(stage, stage.empty, out, "--background", stage.empty)[0] == 1
     assert not out.exists()
+
+
+def test_the_subjects_stature_scales_the_tracked_poses(
+    stage: Stage, folder_take: tuple[np.ndarray, str], tmp_path: Path
+) -> None:
+    # --height 1.77 picks the same body model (men-L, 1.75 m) and tells the tracker the
+    # subject is 1.77 m tall: the poses come out 1.77 / 1.75 times as big.
+    out = tmp_path / "tall.mcap"
+    code, printed, err = track(
+        stage, stage.frames, out, "--background", stage.empty, "--height", "1.77"
+    )
+    assert code == 0, err
+    assert "building" not in printed  # the men-L tree of the store
+
+    def tibia(poses: np.ndarray) -> float:
+        return float(np.linalg.norm(poses[:, [9, 10]] - poses[:, [11, 12]], axis=-1).mean())
+
+    ratio = tibia(read_take(out).poses) / tibia(folder_take[0])
+    assert ratio == pytest.approx(1.77 / HEIGHT, abs=0.003), ratio
