@@ -205,7 +205,8 @@ class SilhouetteTracker:
 
     `height` is the subject's stature in meters (default: the tree's body model's): the
     observed silhouettes are scaled to the model's stature and the poses back to the
-    subject's. `InputError` for a stature outside 0.5..2.5 m.
+    subject's (`size`: the subject's stature over the model's). `InputError` for a
+    stature outside 0.5..2.5 m.
     """
 
     def __init__(
