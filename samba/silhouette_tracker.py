@@ -50,7 +50,8 @@ reappears. `occlusion_factor` = 1 is the plain model (the paper's DM1).
 Beyond the paper's likelihood, a leaf's score also has a Gaussian term (sigma `top_sigma`
 pixels) in the difference between its top row and the observed silhouette's in the
 normalised image: how tall the subject looks above the floor point where it stands, once
-scaled to the body model's stature (the subject's is given to the tracker). The core-
+scaled to the body model's stature (the subject's is given to the tracker). A frame whose
+silhouette the view's top edge cuts (the head or a raised hand out of view) has no term. The core-
 weighted distances charge little for an outline moved a few pixels, so a leaf with the
 feet together, placed at the front foot of a stride (half a step too near the camera,
 hence a tenth bigger after normalising), covered the observed silhouette at little cost:
@@ -255,7 +256,7 @@ class SilhouetteTracker:
         if not mask.any():
             return self._hold(mask)
         normalised, placement = self.tree.view.normalise(mask, self.size)
-        top = int(np.argmax(normalised.any(axis=1)))
+        top = None if mask[0].any() else int(np.argmax(normalised.any(axis=1)))
         settings = self.settings
         held = self._held_ancestors()
         nodes = np.arange(len(self.tree.levels[0]))
@@ -320,11 +321,12 @@ class SilhouetteTracker:
             sigma *= settings.upper_sigma_factor
         return -0.5 * (distances / sigma) ** 2
 
-    def _log_top_term(self, leaves: np.ndarray, top: int) -> np.ndarray:
+    def _log_top_term(self, leaves: np.ndarray, top: int | None) -> np.ndarray:
         """The top-row term (k,) of `leaves` (indices) against the observed normalised
-        silhouette's top row `top`; zeros when `top_sigma` is 0."""
+        silhouette's top row `top`; zeros when `top_sigma` is 0 or `top` is None (the
+        view's top edge cuts the subject, whose top is then not seen)."""
         sigma = self.settings.top_sigma
-        if sigma == 0:
+        if sigma == 0 or top is None:
             return np.zeros(len(leaves))
         return -0.5 * ((self._tops[leaves] - top) / sigma) ** 2
 

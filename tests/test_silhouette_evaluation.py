@@ -10,7 +10,12 @@ import pytest
 from samba.body_model import BodyModel
 from samba.camera import Camera
 from samba.shape_tree import ShapeTree
-from samba.silhouette_evaluation import arm_swing_experiment, staged, track_take
+from samba.silhouette_evaluation import (
+    arm_swing_experiment,
+    observed_silhouettes,
+    staged,
+    track_take,
+)
 from samba.silhouette_tracker import SilhouetteTracker, TrackerSettings
 from samba.silhouette_view import SilhouetteView
 from samba.skeleton import mirror_poses
@@ -140,3 +145,27 @@ def test_a_subject_taller_or_shorter_than_the_body_model_is_tracked_at_its_statu
     assert told.mpjpe <= 7.0 and told.failure_rate <= 0.05, told.mpjpe
     not_told = track_take(motion, poses, tree, noise=0.5, subject=subject)
     assert not_told.mpjpe > 9.0 and not_told.failure_rate > 0.1, not_told.mpjpe
+
+
+def test_frames_whose_top_is_out_of_view_are_tracked_without_the_top_row(
+    tree: ShapeTree,
+) -> None:
+    # The first 20 frames of the bench's first walk, the walker holding a pole straight
+    # up to the view's top edge: the subject's top is out of view, so the top-row term is
+    # left out and the poses are those of the tracker without it; without the pole the
+    # term changes them.
+    take = generate("walk", 4.0, 15.0, 900).poses.astype(np.float64)
+    poses = staged(take, tree.view, 1.75, in_place=True)[:20]
+    masks = observed_silhouettes(poses, tree, 0.5, np.random.default_rng(0))
+    poled = masks.copy()
+    for mask in poled:
+        column = int(np.flatnonzero(mask.any(axis=0)).mean())
+        mask[: np.flatnonzero(mask.any(axis=1))[0] + 1, column - 1 : column + 1] = True
+
+    def tracked(settings: TrackerSettings, frames: np.ndarray) -> np.ndarray:
+        tracker = SilhouetteTracker(tree, settings)
+        return np.array([tracker.step(frame).pose for frame in frames])
+
+    without = TrackerSettings(top_sigma=0.0)
+    np.testing.assert_array_equal(tracked(TrackerSettings(), poled), tracked(without, poled))
+    assert np.abs(tracked(TrackerSettings(), masks) - tracked(without, masks)).max() > 0.01  # m
