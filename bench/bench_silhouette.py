@@ -143,14 +143,9 @@ STATURES = (0.96, 1.04)
 def stature(tree: ShapeTree, reps: int, motions: tuple[str, ...]) -> list[list[object]]:
     """Rows of table 1b: per stature factor and motion, the tracker told the subject's
     stature and not told it, at noise 0.5 (the body model scaled by the factor)."""
-    b = tree.body
     rows = []
     for factor in STATURES:
-        subject = BodyModel.from_girths(
-            f"{b.name} x {factor:g}",
-            b.kind,
-            *(factor * v for v in (b.height, b.chest, b.waist, b.hip)),
-        )
+        subject = tree.body.scaled(factor)
         takes = held_out_takes(reps, tree.view, motions, subject.height)
         for motion in motions:
             told, not_told = [], []

@@ -234,6 +234,14 @@ class BodyModel:
             foot_radius=0.016 * height,
         )
 
+    def scaled(self, factor: float) -> BodyModel:
+        """This body `factor` (> 0) times as tall and as round: stature and girths scaled,
+        the radii following from them (`from_girths`), named "NAME x FACTOR"."""
+        girths = (self.height, self.chest, self.waist, self.hip)
+        return BodyModel.from_girths(
+            f"{self.name} x {factor:g}", self.kind, *(factor * v for v in girths)
+        )
+
     @classmethod
     def catalog(cls) -> tuple[BodyModel, ...]:
         """Every body size: men's, then women's, then children's, each by rising height."""

@@ -161,3 +161,12 @@ def test_bad_input_names_the_problem() -> None:
         scaled_to(standard_pose()[None], 0.0)
     with pytest.raises(InputError, match="pose 1 has no size"):
         scaled_to(np.stack([standard_pose(), np.zeros((13, 3))]), 1.7)
+
+
+def test_a_scaled_body_is_that_much_taller_and_rounder() -> None:
+    model = BodyModel.named("men-L")
+    big = model.scaled(1.04)
+    assert big.name == "men-L x 1.04" and big.kind == model.kind
+    for field in ("height", "chest", "waist", "hip"):
+        assert getattr(big, field) == pytest.approx(1.04 * getattr(model, field))
+    assert big.thigh_radius == pytest.approx(1.04 * model.thigh_radius)

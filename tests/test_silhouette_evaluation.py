@@ -135,10 +135,7 @@ def test_a_subject_taller_or_shorter_than_the_body_model_is_tracked_at_its_statu
     # told the subject's stature, the tracker scales the silhouettes to the model and the
     # poses back (5.5 / 5.7 cm); not told, the size difference reads as depth and pose
     # (11.0 cm, 13% failures / 16.9 cm, 62%).
-    b = tree.body
-    subject = BodyModel.from_girths(
-        "subject", b.kind, factor * b.height, factor * b.chest, factor * b.waist, factor * b.hip
-    )
+    subject = tree.body.scaled(factor)
     take = generate(motion, 4.0, 15.0, seed).poses.astype(np.float64)
     poses = staged(take, tree.view, subject.height, in_place=motion == "walk")
     told = track_take(motion, poses, tree, noise=0.5, subject=subject, height=subject.height)

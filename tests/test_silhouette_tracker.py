@@ -13,7 +13,7 @@ from silhouette_fixtures import (
     source_poses,
 )
 
-from samba.body_model import PART_NAMES, BodyModel
+from samba.body_model import PART_NAMES
 from samba.errors import InputError
 from samba.shape_tree import PART_JOINTS, ShapeTree
 from samba.silhouette_distance import SilhouetteWeights
@@ -158,10 +158,7 @@ def test_a_taller_subject_comes_back_at_its_stature(
     # rendered so (the model scaled by 1.05): told the stature, the tracker finds the
     # leaf and returns it 5% taller, standing where the subject stands.
     leaf = _facing_leaves_of_take(small_tree, sources, 6)[0]
-    b = small_tree.body
-    taller = BodyModel.from_girths(
-        "tall", b.kind, 1.05 * b.height, 1.05 * b.chest, 1.05 * b.waist, 1.05 * b.hip
-    )
+    taller = small_tree.body.scaled(1.05)
     pose = small_tree.leaves.poses[leaf].astype(np.float64)
     floor = pose[[7, 8]].mean(axis=0) * np.array([1.0, 0.0, 1.0])
     truth = floor + 1.05 * (pose - floor)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from silhouette_fixtures import BODY, CAMERA, view
 
-from samba.body_model import ANKLE_HEIGHT_FRACTION, BodyModel
+from samba.body_model import ANKLE_HEIGHT_FRACTION
 from samba.camera import Camera
 from samba.errors import InputError
 from samba.silhouette_render import render_silhouettes
@@ -113,10 +113,7 @@ def test_a_taller_subject_normalises_to_the_body_models_size() -> None:
     model, _ = the_view.normalise(_silhouette((0.0, 0.0, 0.0)))
     floor = STANDING[[7, 8]].mean(axis=0) * np.array([1.0, 0.0, 1.0])
     taller = floor + 1.05 * (STANDING - floor)
-    b = BODY
-    big = BodyModel.from_girths(
-        "tall", b.kind, 1.05 * b.height, 1.05 * b.chest, 1.05 * b.waist, 1.05 * b.hip
-    )
+    big = BODY.scaled(1.05)
     mask = render_silhouettes(taller[None], the_view.camera, big)[0]
     told, told_place = the_view.normalise(mask, 1.05)
     as_is, place = the_view.normalise(mask)
