@@ -79,7 +79,7 @@ def test_service_benchmark_prints_its_latency_table(capsys: pytest.CaptureFixtur
     (row,) = bench_service.bench(1.0, [2], [1], "samba", ["server"], ["independent"])
     out = capsys.readouterr().out
     assert "Baseline, same run: Reconstructor.step (samba)" in out and "e2e p99" in out
-    assert "back to back" in out and "paced at 60 fps" in out
+    assert "back to back" in out and "paced at 60 fps" in out and "fixed numpy job" in out
     # 2 sessions x 60 frames x 2 cameras in, every frame out, received
     assert row[:7] == ["server", "independent", 2, 1, 240, 0, 0]
     assert all(isinstance(v, float) and v > 0 for v in row[7:12])
