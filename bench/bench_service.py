@@ -48,6 +48,7 @@ import sys
 import tempfile
 import time
 import urllib.request
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -110,18 +111,28 @@ def pipeline_ms(
             for i in range(sessions)
         ]
         frames = [CameraMarkers.from_labels(capture.pixels[:, f]) for f in range(capture.frames)]
-        for frame in frames[: round(FPS)]:
-            process_together([(p, frame, 0.0, time.time()) for p in pipelines])
-        times = []
-        due = time.perf_counter()
-        for frame in frames:
-            due += pace_s
-            time.sleep(max(0.0, due - time.perf_counter()))
-            start = time.perf_counter()
-            process_together([(p, frame, 0.0, time.time()) for p in pipelines])
-            times.append(time.perf_counter() - start)
+
+        def compute(frame: int) -> None:
+            process_together([(p, frames[frame], 0.0, time.time()) for p in pipelines])
+
+        paced_ms(compute, round(FPS), 0.0)
+        times = paced_ms(compute, len(frames), pace_s)
         for pipeline in pipelines:
             pipeline.close()
+    return times
+
+
+def paced_ms(work: Callable[[int], None], runs: int, pace_s: float) -> np.ndarray:
+    """Milliseconds (runs,) of each call `work(i)`, i = 0 .. runs - 1, one call every
+    `pace_s` seconds (0: back to back)."""
+    times = []
+    due = time.perf_counter()
+    for i in range(runs):
+        due += pace_s
+        time.sleep(max(0.0, due - time.perf_counter()))
+        start = time.perf_counter()
+        work(i)
+        times.append(time.perf_counter() - start)
     return np.array(times) * 1e3
 
 
@@ -133,28 +144,16 @@ def fixed_job_ms(length_ms: float, runs: int, pace_s: float) -> np.ndarray:
     time, no I/O)."""
     matrix = np.random.default_rng(0).normal(size=(64, 64)) / 64
 
-    def job(products: int) -> None:
+    products = 16
+
+    def job(_run: int) -> None:
         x = matrix
         for _ in range(products):
             x = np.tanh(x @ matrix)
 
-    products = 16
     for _ in range(8):  # sizes converge in 2-3 rounds; the median of 5 against noise
-        took = []
-        for _ in range(5):
-            start = time.perf_counter()
-            job(products)
-            took.append(time.perf_counter() - start)
-        products = max(1, round(products * length_ms / (np.median(took) * 1e3)))
-    times = []
-    due = time.perf_counter()
-    for _ in range(runs):
-        due += pace_s
-        time.sleep(max(0.0, due - time.perf_counter()))
-        start = time.perf_counter()
-        job(products)
-        times.append(time.perf_counter() - start)
-    return np.array(times) * 1e3
+        products = max(1, round(products * length_ms / np.median(paced_ms(job, 5, 0.0))))
+    return paced_ms(job, runs, pace_s)
 
 
 def step_ms(capture: SyntheticCapture, store: Path, name: str) -> np.ndarray:
