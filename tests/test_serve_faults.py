@@ -136,9 +136,9 @@ def test_a_camera_node_that_stops_and_restarts_is_picked_up_again(
         asyncio.run(run())
         stage = settled(server)["sessions"]["stage"]
     sync = stage["sync"]
-    assert sync["restarts"] == 1
-    assert sync["skipped"] == 60  # frames 120..179 had one camera
-    assert sync["complete"] == n - 60 == stage["frames_out"]
+    assert sync["restarts"] == 1, sync
+    assert sync["skipped"] == 60, sync  # frames 120..179 had one camera
+    assert sync["complete"] == n - 60 == stage["frames_out"], sync
 
 
 @pytest.fixture(scope="module")
