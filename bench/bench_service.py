@@ -143,7 +143,6 @@ def fixed_job_ms(length_ms: float, runs: int, pace_s: float) -> np.ndarray:
     once per frame period and idles in between (the same small code and data every
     time, no I/O)."""
     matrix = np.random.default_rng(0).normal(size=(64, 64)) / 64
-
     products = 16
 
     def job(_run: int) -> None:
@@ -162,12 +161,11 @@ def step_ms(capture: SyntheticCapture, store: Path, name: str) -> np.ndarray:
         capture.cameras.projections, capture.cameras.undistort(capture.pixels), gate_px=10.0
     )
     reconstructor = method(name).build(PoseStore.open(store).index)
-    times = []
-    for markers in views.points:
-        start = time.perf_counter()
-        reconstructor.step(markers)
-        times.append(time.perf_counter() - start)
-    return np.array(times) * 1e3
+
+    def step(frame: int) -> None:
+        reconstructor.step(views.points[frame])
+
+    return paced_ms(step, len(views.points), 0.0)
 
 
 class VmcTimes:
