@@ -31,17 +31,17 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from text_table import print_table  # noqa: E402
 
-from samba.marker_detection import detect_markers  # noqa: E402
-from samba.marker_render import RenderOptions, render  # noqa: E402
-from samba.marker_tracking import MarkerTracker, TrackerSettings  # noqa: E402
-from samba.observation import (  # noqa: E402
+from samba.body.skeleton import markers_of  # noqa: E402
+from samba.cameras.synthetic_cameras import with_size  # noqa: E402
+from samba.cameras.triangulation import triangulate  # noqa: E402
+from samba.markers.detection import detect_markers  # noqa: E402
+from samba.markers.observation import (  # noqa: E402
     evaluation_cameras,
     spread_cameras,
 )
-from samba.skeleton import markers_of  # noqa: E402
-from samba.synthetic import generate  # noqa: E402
-from samba.synthetic_cameras import with_size  # noqa: E402
-from samba.triangulation import triangulate  # noqa: E402
+from samba.markers.render import RenderOptions, render  # noqa: E402
+from samba.markers.tracking import MarkerTracker, TrackerSettings  # noqa: E402
+from samba.synthetic.motions import generate  # noqa: E402
 
 RESOLUTIONS = ((160, 120), (320, 240), (640, 480), (1280, 720), (1920, 1080))
 PAPER_MS = {(160, 120): 64.0, (320, 240): 131.0, (640, 480): 423.0}

@@ -10,7 +10,7 @@ baseline measured in the same run:
 * queries: a plain scipy k-d tree over the raw 24-D aligned marker features.
 
 Exact queries are timed through the tree and, up to 200,000 poses, by the scan that
-small tables use (`db.index.SCAN_LIMIT`), so the crossover shows.
+small tables use (`samba.db.index.SCAN_LIMIT`), so the crossover shows.
 
 Databases beyond the real poses are grown with small random joint-angle perturbations
 (5 degrees per joint, bone lengths kept). Queries are observations the database does not
@@ -38,16 +38,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from samba.db.index import APPROXIMATE_EPS, SCAN_LIMIT, PoseIndex, marker_features  # noqa: E402
+from samba.db.store import PoseStore  # noqa: E402
+from samba.ingest.batch import import_paths  # noqa: E402
+from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
 from text_table import print_table  # noqa: E402
 
-from db.index import APPROXIMATE_EPS, SCAN_LIMIT, PoseIndex, marker_features  # noqa: E402
-from db.store import PoseStore  # noqa: E402
-from ingest.batch import import_paths  # noqa: E402
-from ingest.bvh_take import load_bvh_take  # noqa: E402
-from samba.alignment import align_markers  # noqa: E402
-from samba.perturb import perturb_joint_angles  # noqa: E402
-from samba.skeleton import N_MARKERS, markers_of  # noqa: E402
-from samba.take import Take  # noqa: E402
+from samba.body.alignment import align_markers  # noqa: E402
+from samba.body.perturb import perturb_joint_angles  # noqa: E402
+from samba.body.skeleton import N_MARKERS, markers_of  # noqa: E402
+from samba.body.take import Take  # noqa: E402
 
 K = 10
 SCANNED_UP_TO = 200_000

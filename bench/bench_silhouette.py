@@ -42,25 +42,25 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
 from text_table import print_table  # noqa: E402
 
-from ingest.bvh_take import load_bvh_take  # noqa: E402
-from samba.body_model import BodyModel  # noqa: E402
-from samba.camera import Camera  # noqa: E402
-from samba.shape_tree import ShapeTree  # noqa: E402
-from samba.silhouette_distance import SilhouetteWeights  # noqa: E402
-from samba.silhouette_evaluation import (  # noqa: E402
+from samba.body.body_model import BodyModel  # noqa: E402
+from samba.body.skeleton import mirror_poses  # noqa: E402
+from samba.cameras.camera import Camera  # noqa: E402
+from samba.silhouette.distance import SilhouetteWeights  # noqa: E402
+from samba.silhouette.evaluation import (  # noqa: E402
     FAILURE_CM,
     arm_swing_experiment,
     observed_silhouettes,
     staged,
     track_take,
 )
-from samba.silhouette_runs import RowSums  # noqa: E402
-from samba.silhouette_tracker import TrackerSettings  # noqa: E402
-from samba.silhouette_view import SilhouetteView  # noqa: E402
-from samba.skeleton import mirror_poses  # noqa: E402
-from samba.synthetic import generate, library  # noqa: E402
+from samba.silhouette.runs import RowSums  # noqa: E402
+from samba.silhouette.shape_tree import ShapeTree  # noqa: E402
+from samba.silhouette.tracker import TrackerSettings  # noqa: E402
+from samba.silhouette.view import SilhouetteView  # noqa: E402
+from samba.synthetic.motions import generate, library  # noqa: E402
 
 CAMERA = Camera.look_at("front", (0.0, 1.2, 3.6), (0.0, 0.9, 0.0), (320, 240), 55.0)
 BODY = BodyModel.for_subject(1.75)

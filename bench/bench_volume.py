@@ -36,9 +36,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.text_table import print_table  # noqa: E402
-from samba.articulated_figure import long_chain, quadruped  # noqa: E402
-from samba.isomap import VoxelGraph  # noqa: E402
-from samba.volume_evaluation import creature_take, human_take  # noqa: E402
+from samba.volume.articulated_figure import long_chain, quadruped  # noqa: E402
+from samba.volume.evaluation import creature_take, human_take  # noqa: E402
+from samba.volume.isomap import VoxelGraph  # noqa: E402
 
 PAPER_SECONDS = (60.0, 90.0)
 """The paper's seconds per frame (Matlab on a 350 MHz Pentium)."""

@@ -3,11 +3,11 @@
 Run from the project root:  python bench/camera_chain_report.py [BVH ...] [--seconds S]
 
 Each take (default: ../shared/data/cmu/iclone_007_05.bvh, or $SAMBA_DATA; a synthetic
-kick without the data) is filmed by the synthetic rig (`samba.camera_chain.run_chain`):
+kick without the data) is filmed by the synthetic rig (`samba.markers.camera_chain.run_chain`):
 render -> detect -> track -> triangulate, after a standing lead-in in the standard pose.
 Rows: two EVALUATION.md cameras at 160x120, 320x240 and 640x480; three and four cameras
 spread around the subject (`spread_cameras`) at 160x120 and 640x480, all with lost labels
-found again across the cameras (`samba.cross_view_labels`); and, as the baselines
+found again across the cameras (`samba.markers.cross_view_labels`); and, as the baselines
 measured on the same frames, each camera's guarded tracker alone and the paper's plain
 nearest-neighbour filter (`guard_swaps=False`). Columns: RMS 3D error (cm) over the
 markers reconstructed where at least two cameras see them; missing = (frame, marker)
@@ -18,12 +18,12 @@ over cameras and frames.
 A second table films each take as the subject leaving and coming back
 (`leave_and_return`): its first half, a second with nobody on the stage, then the
 second half 1.3 m away, turned 25 degrees from where the take started, after a second
-in the standard pose. The stage finds the subject again (`samba.standard_pose_search`);
+in the standard pose. The stage finds the subject again (`samba.markers.standard_pose_search`);
 the baseline rows are the same stage without that search, on the same frames. "lost
 after return" counts from the end of that second.
 
 A third table places random subjects in the standard pose on the stage
-(`samba.synthetic.random_standing`: bodies 1.5-1.95 m with segments scaled 0.9-1.1,
+(`samba.synthetic.motions.random_standing`: bodies 1.5-1.95 m with segments scaled 0.9-1.1,
 arms 10-70 degrees, within 1 m of the centre, turned up to 50 degrees) before three
 320x240 cameras, as an ideal detector sees them with pixel noise and stray bright spots
 (`detected_blobs`), and counts how often the search finds them, the frames with a label
@@ -46,19 +46,19 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take  # noqa: E402
 from text_table import print_table  # noqa: E402
 
-from ingest.bvh_take import BvhImportOptions, load_bvh_take  # noqa: E402
-from samba.camera import CameraGroup  # noqa: E402
-from samba.camera_chain import ChainSettings, run_chain  # noqa: E402
-from samba.cross_view_labels import CrossViewSettings  # noqa: E402
-from samba.lead_in import standing_lead_in  # noqa: E402
-from samba.observation import spread_cameras  # noqa: E402
-from samba.skeleton import markers_of  # noqa: E402
-from samba.stage_tracking import StageTracker  # noqa: E402
-from samba.standard_pose_search import StandardPoseSearch  # noqa: E402
-from samba.synthetic import generate, random_standing  # noqa: E402
-from samba.synthetic_cameras import detected_blobs, with_size  # noqa: E402
+from samba.body.skeleton import markers_of  # noqa: E402
+from samba.cameras.camera import CameraGroup  # noqa: E402
+from samba.cameras.synthetic_cameras import detected_blobs, with_size  # noqa: E402
+from samba.markers.camera_chain import ChainSettings, run_chain  # noqa: E402
+from samba.markers.cross_view_labels import CrossViewSettings  # noqa: E402
+from samba.markers.lead_in import standing_lead_in  # noqa: E402
+from samba.markers.observation import spread_cameras  # noqa: E402
+from samba.markers.stage_tracking import StageTracker  # noqa: E402
+from samba.markers.standard_pose_search import StandardPoseSearch  # noqa: E402
+from samba.synthetic.motions import generate, random_standing  # noqa: E402
 
 CONFIGURATIONS = (
     ("2 cameras", 2, (160, 120), "cross-view"),

@@ -4,9 +4,9 @@
 queries for marker observations. Foreign formats are `ingest`'s business.
 """
 
-from db.errors import QueryError, StoreCorruptedError, StoreError
-from db.index import PoseIndex
-from db.store import AddResult, PoseStore, VerifyReport
+from samba.db.errors import QueryError, StoreCorruptedError, StoreError
+from samba.db.index import PoseIndex
+from samba.db.store import AddResult, PoseStore, VerifyReport
 
 __all__ = [
     "AddResult",

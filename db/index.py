@@ -1,6 +1,6 @@
 """The prebuilt k-d tree index: k nearest database poses for observed markers.
 
-Features are the 8 markers of each pose after `samba.alignment.align_markers` (24
+Features are the 8 markers of each pose after `samba.body.alignment.align_markers` (24
 numbers, meters). The distance between an observation and a pose is the Euclidean
 distance between their features over the markers the observation has.
 
@@ -38,11 +38,11 @@ from pathlib import Path
 
 import numpy as np
 import scipy
+from samba.db.errors import QueryError, StoreError
 from scipy.spatial import cKDTree
 
-from db.errors import QueryError, StoreError
-from samba.alignment import align_markers
-from samba.skeleton import N_MARKERS, markers_of
+from samba.body.alignment import align_markers
+from samba.body.skeleton import N_MARKERS, markers_of
 
 FORMAT = 2
 DEFAULT_DIMS = 14

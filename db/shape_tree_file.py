@@ -1,6 +1,6 @@
 """Shape trees saved with the pose database: `<store>/shape_trees/<name>.npz`.
 
-A shape tree (`samba.shape_tree.ShapeTree`) is built once per camera and body model and
+A shape tree (`samba.silhouette.shape_tree.ShapeTree`) is built once per camera and body model and
 takes minutes for a large database, so it is kept beside the poses it was built from.
 One NumPy archive (`np.savez`, no pickles) holds the camera (intrinsics, pose,
 distortion, image size), the view's home point, the body model's girths and every
@@ -15,14 +15,14 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+from samba.db.errors import StoreError
 
-from db.errors import StoreError
-from samba.atomic_file import atomic_path
-from samba.body_model import BodyModel
-from samba.camera import Camera
-from samba.shape_tree import ShapeTree, TreeLevel
-from samba.silhouette_runs import SilhouetteRuns
-from samba.silhouette_view import SilhouetteView
+from samba.base.atomic_file import atomic_path
+from samba.body.body_model import BodyModel
+from samba.cameras.camera import Camera
+from samba.silhouette.runs import SilhouetteRuns
+from samba.silhouette.shape_tree import ShapeTree, TreeLevel
+from samba.silhouette.view import SilhouetteView
 
 FORMAT = "samba-shape-tree/1"
 TREES_FOLDER = "shape_trees"

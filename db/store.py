@@ -2,10 +2,10 @@
 
 Layout of a store directory:
 
-* `catalog.sqlite`: the catalog (`db.catalog`): a row per take and the committed state.
+* `catalog.sqlite`: the catalog (`samba.db.catalog`): a row per take and the committed state.
 * `poses-<name>.f32`: every pose as float32 rows of 13 x 3 meters, memory-mapped.
 * `rows-<name>.i32`: per pose row, int32 (take id, frame number).
-* `index.npz`: the prebuilt k-d tree index (`db.index`), tagged with the generation.
+* `index.npz`: the prebuilt k-d tree index (`samba.db.index`), tagged with the generation.
 
 Writers hold an exclusive `flock` on `lock`. An import appends pose rows past the
 committed count, fsyncs, then commits the catalog rows and the new count in one SQLite
@@ -32,8 +32,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
-
-from db.catalog import (
+from samba.db.catalog import (
     FORMAT,
     SCHEMA,
     TakeInfo,
@@ -41,10 +40,11 @@ from db.catalog import (
     read_state,
     read_takes,
 )
-from db.errors import StoreCorruptedError, StoreError
-from db.index import PoseIndex
-from samba.skeleton import N_JOINTS, mirror_poses
-from samba.take import Take
+from samba.db.errors import StoreCorruptedError, StoreError
+from samba.db.index import PoseIndex
+
+from samba.body.skeleton import N_JOINTS, mirror_poses
+from samba.body.take import Take
 
 CATALOG = "catalog.sqlite"
 INDEX = "index.npz"

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from db.store import PoseStore
-from samba.synthetic import library
+from samba.db.store import PoseStore
+
+from samba.synthetic.motions import library
 
 
 def build_synthetic_store(
@@ -17,7 +18,7 @@ def build_synthetic_store(
     mirror: bool = True,
 ) -> PoseStore:
     """Create a store at `path` (must not exist) holding `takes_per_motion` takes of
-    `seconds` of every built-in motion at 30 fps (`samba.synthetic.library`, random bodies
+    `seconds` of every built-in motion at 30 fps (`samba.synthetic.motions.library`, random bodies
     from `seed`), with their mirror images when `mirror`, and its saved index."""
     store = PoseStore.create(path)
     for take in library(takes_per_motion=takes_per_motion, seconds=seconds, seed=seed):

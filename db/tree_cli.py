@@ -1,6 +1,6 @@
 """`samba db tree STORE --calib FILE ...`: build the shape tree of single-camera silhouette
 tracking from a pose store's poses, for one camera and body model, and save it with the
-store (`db.shape_tree_file`)."""
+store (`samba.db.shape_tree_file`)."""
 
 from __future__ import annotations
 
@@ -10,17 +10,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from samba.db.shape_tree_file import read_shape_tree, tree_path, write_shape_tree
+from samba.db.store import PoseStore
 from tqdm import tqdm
 
-from db.shape_tree_file import read_shape_tree, tree_path, write_shape_tree
-from db.store import PoseStore
-from samba.body_model import KINDS, BodyModel
-from samba.calibration_file import read_calibration
-from samba.camera import Camera
-from samba.cli_arguments import positive_float
-from samba.errors import InputError
-from samba.shape_tree import ShapeTree
-from samba.silhouette_view import SilhouetteView
+from samba.base.arguments import positive_float
+from samba.base.errors import InputError
+from samba.body.body_model import KINDS, BodyModel
+from samba.cameras.calibration_file import read_calibration
+from samba.cameras.camera import Camera
+from samba.silhouette.shape_tree import ShapeTree
+from samba.silhouette.view import SilhouetteView
 
 
 def add_tree_command(sub: Any) -> None:
@@ -50,7 +50,7 @@ def add_camera_arguments(parser: argparse.ArgumentParser) -> None:
     """The flags that pick the camera, the body model and the home point."""
     parser.add_argument("--camera", help="camera name or index in the calibration (default 0)")
     body = parser.add_mutually_exclusive_group()
-    body.add_argument("--body", help="body model name (see samba.body_model catalog)")
+    body.add_argument("--body", help="body model name (see samba.body.body_model catalog)")
     body.add_argument(
         "--height", type=positive_float, help="subject height in meters: nearest body model"
     )

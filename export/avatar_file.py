@@ -22,10 +22,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-from export.errors import ExportError
-from export.gltf_reader import node_rest_positions, read_gltf
-from export.humanoid import BONE_INDEX, BONE_NAMES, HumanoidRig
+from samba.export.errors import ExportError
+from samba.export.gltf_reader import node_rest_positions, read_gltf
+from samba.export.humanoid import BONE_INDEX, BONE_NAMES, HumanoidRig
 
 REQUIRED: tuple[str, ...] = tuple(
     name for name in BONE_NAMES if name not in ("Spine", "Chest", "Neck")
@@ -54,7 +53,7 @@ _ALIASES: dict[str, tuple[str, ...]] = {
 
 
 USD_SUFFIXES: tuple[str, ...] = (".usd", ".usda", ".usdc")
-"""Suffixes (any letter case) of the avatars read as USD: `export.usd_writer.SUFFIXES`,
+"""Suffixes (any letter case) of the avatars read as USD: `samba.export.usd_writer.SUFFIXES`,
 spelt out so that reading a glTF avatar does not load usd-core."""
 
 _MIXAMO_PREFIX = re.compile(r"^mixamorig\d*")
@@ -90,7 +89,7 @@ def _usd_bones(path: str | Path) -> dict[str, np.ndarray]:
     """Humanoid bone name -> rest position (3,) in meters, +Y up, of the first humanoid
     UsdSkel Skeleton of a USD avatar, its joints found by name; a Skeleton that cannot be
     posed is passed over when another one is humanoid."""
-    from export.usd_reader import read_usd_skeleton_rests  # pxr loads only for USD avatars
+    from samba.export.usd_reader import read_usd_skeleton_rests  # pxr loads only for USD avatars
 
     skeletons = read_usd_skeleton_rests(path)
     reasons = []

@@ -5,8 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from export.humanoid import N_BONES
+from samba.export.humanoid import N_BONES
 
 MAX_INFLUENCES = 4
 """Bones that may move one vertex (the glTF / game-engine limit)."""

@@ -8,16 +8,16 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from samba.export.avatar_mesh import AvatarMesh
+from samba.export.errors import ExportError
+from samba.export.humanoid import HumanoidRig
+from samba.export.motion import HumanoidMotion
+from samba.export.retarget import retarget
+from samba.export.take_source import load_take
 from tqdm import tqdm
 
-from export.avatar_mesh import AvatarMesh
-from export.errors import ExportError
-from export.humanoid import HumanoidRig
-from export.motion import HumanoidMotion
-from export.retarget import retarget
-from export.take_source import load_take
-from samba.cli_arguments import positive_float
-from samba.errors import SambaError
+from samba.base.arguments import positive_float
+from samba.base.errors import SambaError
 
 FORMAT_SUFFIXES: dict[str, tuple[str, ...]] = {
     "usd": (".usda", ".usdc", ".usd"),
@@ -173,12 +173,12 @@ def output_paths(takes: list[str], output: Path, fmt: str) -> list[tuple[str, Pa
 def load_avatar(path: str | None) -> Avatar:
     """The avatar of `--avatar FILE`, or the default mannequin; a generated, skinned
     mannequin body in both cases."""
-    from export.mannequin import mannequin
+    from samba.export.mannequin import mannequin
 
     if path is None:
         rig = HumanoidRig.from_body()
     else:
-        from export.avatar_file import read_avatar_rig
+        from samba.export.avatar_file import read_avatar_rig
 
         rig = read_avatar_rig(path)
     return Avatar(rig=rig, mesh=mannequin(rig))
@@ -188,8 +188,8 @@ def write(fmt: str, path: Path, motion: HumanoidMotion, mesh: AvatarMesh, unit: 
     """Write `motion` to `path` in `fmt` (USD and glTF with the skinned `mesh`, BVH in
     `unit`)."""
     if fmt == "bvh":
-        importlib.import_module("export.bvh_writer").write_bvh(path, motion, unit=unit)
+        importlib.import_module("samba.export.bvh_writer").write_bvh(path, motion, unit=unit)
     elif fmt == "glb":
-        importlib.import_module("export.gltf_writer").write_glb(path, motion, mesh)
+        importlib.import_module("samba.export.gltf_writer").write_glb(path, motion, mesh)
     else:
-        importlib.import_module("export.usd_writer").write_usd(path, motion, mesh)
+        importlib.import_module("samba.export.usd_writer").write_usd(path, motion, mesh)

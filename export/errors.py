@@ -1,6 +1,6 @@
 """Errors raised while exporting takes: bad avatars, unknown takes, unwritable outputs."""
 
-from samba.errors import InputError
+from samba.base.errors import InputError
 
 
 class ExportError(InputError):

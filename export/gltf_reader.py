@@ -1,6 +1,6 @@
 """Reading glTF 2.0 files: GLB containers (.glb, .vrm) and JSON glTF (.gltf).
 
-The verification reader of `export.gltf_writer`, written for any reasonable glTF: it
+The verification reader of `samba.export.gltf_writer`, written for any reasonable glTF: it
 parses the GLB container itself, loads JSON glTF's buffers from the files beside it or
 from base64 `data:` URIs, reads accessors of any component type (normalised integers
 included, interleaved views too) and samples STEP, LINEAR and CUBICSPLINE animation
@@ -22,9 +22,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from samba.export.errors import ExportError
 from scipy.spatial.transform import Rotation
-
-from export.errors import ExportError
 
 _MAGIC = b"glTF"
 _JSON_CHUNK = 0x4E4F534A

@@ -23,7 +23,7 @@ from functools import cached_property
 
 import numpy as np
 
-from samba.skeleton import Body
+from samba.body.skeleton import Body
 
 BONE_NAMES: tuple[str, ...] = (
     "Hips",

@@ -11,10 +11,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from samba.export.humanoid import N_BONES, HumanoidRig
+from samba.export.retarget import LIMBS, leg_length, rest_frames, root_positions, stream_rotations
 
-from export.humanoid import N_BONES, HumanoidRig
-from export.retarget import LIMBS, leg_length, rest_frames, root_positions, stream_rotations
-from samba.skeleton import N_JOINTS
+from samba.body.skeleton import N_JOINTS
 
 
 class LiveRetarget:

@@ -8,7 +8,7 @@ lie at the toe tips' height (the floor, for `HumanoidRig.from_body`). Every size
 fraction of the body's height, so small and tall rigs get the same build. Quadric edge
 collapse (pymeshlab) then brings it down to a game-friendly triangle count, keeping
 topology and face orientation, and a few edge-swap and smoothing rounds remove sliver
-triangles. Skin weights come from `export.skin_weights`, measured in the same body
+triangles. Skin weights come from `samba.export.skin_weights`, measured in the same body
 thickness (`BONE_RADIUS`) the limbs are built with.
 """
 
@@ -17,10 +17,9 @@ from __future__ import annotations
 import manifold3d
 import numpy as np
 import pymeshlab
-
-from export.avatar_mesh import AvatarMesh
-from export.humanoid import BONE_INDEX, TIP_BONES, HumanoidRig
-from export.skin_weights import skin_weights
+from samba.export.avatar_mesh import AvatarMesh
+from samba.export.humanoid import BONE_INDEX, TIP_BONES, HumanoidRig
+from samba.export.skin_weights import skin_weights
 
 SPHERE_SEGMENTS = 40
 """Segments around the primitive spheres before decimation."""

@@ -5,19 +5,19 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from samba.db.store import PoseStore
+from samba.export.errors import ExportError
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.ingest.mcap_take import read_take
 
-from db.store import PoseStore
-from export.errors import ExportError
-from ingest.bvh_take import BvhImportOptions, load_bvh_take
-from ingest.mcap_take import read_take
-from samba.skeleton import N_JOINTS
-from samba.take import Take
+from samba.body.skeleton import N_JOINTS
+from samba.body.take import Take
 
 
 def load_take(ref: str, store: str | None = None) -> Take:
     """The take named by `ref`: a take name or id of the pose store at `store`, or
     without a store a BVH file path (read at its own frame rate, any supported rig) or an
-    MCAP take recorded by the live service (`ingest.mcap_take.read_take`).
+    MCAP take recorded by the live service (`samba.ingest.mcap_take.read_take`).
 
     Store takes whose near-duplicate poses were dropped on import get the missing
     frames back by linear interpolation, so the take plays at its recorded speed.

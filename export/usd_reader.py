@@ -1,6 +1,6 @@
 """Reading USD files: joint world positions posed by UsdSkel itself and the UsdValidation
-report, to verify what `export.usd_writer` writes (FORMATS.md §1.6, §1.7), and the rest
-pose of every UsdSkel Skeleton, in our frame, for avatars (`export.avatar_file`)."""
+report, to verify what `samba.export.usd_writer` writes (FORMATS.md §1.6, §1.7), and the rest
+pose of every UsdSkel Skeleton, in our frame, for avatars (`samba.export.avatar_file`)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from pxr import Tf, Usd, UsdGeom, UsdSkel, UsdValidation
-
-from export.errors import ExportError
-from export.usd_writer import tf_error_text
+from samba.export.errors import ExportError
+from samba.export.usd_writer import tf_error_text
 
 _Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 """Rotation (-90 degrees about X) taking a Z-up stage's points to +Y up: (x, y, z) ->

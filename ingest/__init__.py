@@ -5,11 +5,11 @@ rig (rigs.py) and normalises units and axes (normalize.py), `import_paths` (batc
 fills a pose store.
 """
 
-from ingest.batch import FileResult, import_paths
-from ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh
-from ingest.bvh_take import BvhImportOptions, load_bvh_take
-from ingest.errors import BvhError, RigError
-from ingest.rigs import BUILTIN_RIGS, RigMap, detect_rig
+from samba.ingest.batch import FileResult, import_paths
+from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.ingest.errors import BvhError, RigError
+from samba.ingest.rigs import BUILTIN_RIGS, RigMap, detect_rig
 
 __all__ = [
     "BUILTIN_RIGS",

@@ -1,7 +1,7 @@
 """BVH reader: the whole grammar, strict errors with line numbers, batched kinematics.
 
 Shaped like the `mcap` package's reader: `read_bvh(path)` / `parse_bvh(text)` return a
-`BvhFile` record; malformed input raises `ingest.errors.BvhError` naming the file and
+`BvhFile` record; malformed input raises `samba.ingest.errors.BvhError` naming the file and
 line. Accepted: any channel order per joint, position channels on any joint, End Sites,
 several ROOTs, tabs / CRLF / blank lines / scientific notation, `Frames:` with or
 without tabs. Position channels replace the matching component of the joint's OFFSET
@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
+from samba.ingest.errors import BvhError
 
-from ingest.errors import BvhError
-from samba.kinematics import euler_to_quaternions, forward_kinematics
+from samba.body.kinematics import euler_to_quaternions, forward_kinematics
 
 _CHANNELS = {f"{axis}{kind}": (kind, axis) for axis in "XYZ" for kind in ("position", "rotation")}
 _TOKEN = re.compile(r"[{}]|[^\s{}]+")

@@ -8,10 +8,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from ingest.bvh import parse_bvh
-from ingest.errors import BvhError
-from ingest.normalize import (
+from samba.ingest.bvh import parse_bvh
+from samba.ingest.errors import BvhError
+from samba.ingest.normalize import (
     UNITS,
     UP_AXES,
     chirality,
@@ -23,9 +22,15 @@ from ingest.normalize import (
     level_floor,
     rotation_to_y_up,
 )
-from ingest.rigs import RigMap, map_rig
-from samba.kinematics import forward_kinematics, resample_times, sample_linear, sample_rotations
-from samba.take import Take
+from samba.ingest.rigs import RigMap, map_rig
+
+from samba.body.kinematics import (
+    forward_kinematics,
+    resample_times,
+    sample_linear,
+    sample_rotations,
+)
+from samba.body.take import Take
 
 _CMU_NAME = re.compile(r"(\d+)_(\d+)$")
 _MAX_REACH = 1e9
@@ -38,8 +43,8 @@ class BvhImportOptions:
 
     `fps`: the output rate (frames per second), None for the file's own.
     `skip_frames`: leading source frames to drop. `skip_tpose`: drop leading T-pose frames found by
-    `ingest.normalize.leading_tpose_frames` (otherwise they are kept with a warning).
-    `units`: 'auto' or a key of `ingest.normalize.UNITS`. `up`:
+    `samba.ingest.normalize.leading_tpose_frames` (otherwise they are kept with a warning).
+    `units`: 'auto' or a key of `samba.ingest.normalize.UNITS`. `up`:
     'auto' or a signed axis such as '+z'. `handedness`: 'auto' (mirror data whose knees
     bend backwards), 'right' (keep) or 'left' (negate X). `rig`: a rig map, or None to
     detect one. `subject` / `action`: catalog labels ('' derives the subject from CMU

@@ -7,16 +7,16 @@ import json
 import sys
 
 import numpy as np
+from samba.db.errors import QueryError
+from samba.db.store import PoseStore
+from samba.db.tree_cli import add_tree_command
+from samba.ingest.batch import import_paths
+from samba.ingest.bvh_take import BvhImportOptions
+from samba.ingest.normalize import UNITS, UP_AXES
+from samba.ingest.rigs import BUILTIN_RIGS, RigMap, rig_by_name
 
-from db.errors import QueryError
-from db.store import PoseStore
-from db.tree_cli import add_tree_command
-from ingest.batch import import_paths
-from ingest.bvh_take import BvhImportOptions
-from ingest.normalize import UNITS, UP_AXES
-from ingest.rigs import BUILTIN_RIGS, RigMap, rig_by_name
-from samba.errors import InputError
-from samba.skeleton import MARKER_JOINTS, MARKER_NAMES
+from samba.base.errors import InputError
+from samba.body.skeleton import MARKER_JOINTS, MARKER_NAMES
 
 
 def register(parser: argparse.ArgumentParser) -> None:

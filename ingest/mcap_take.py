@@ -1,4 +1,4 @@
-"""`read_take`: a take recorded by the live service (`service.take_recorder.TakeRecorder`)
+"""`read_take`: a take recorded by the live service (`samba.service.take_recorder.TakeRecorder`)
 back as a `Take`, even from a killed recorder.
 
 The file is read as a stream of records, not through its summary, so a file without a
@@ -16,10 +16,10 @@ import numpy as np
 from mcap.records import Channel, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC
+from samba.ingest.errors import TakeFileError
 
-from ingest.errors import TakeFileError
-from samba.skeleton import N_JOINTS
-from samba.take import Take
+from samba.body.skeleton import N_JOINTS
+from samba.body.take import Take
 
 POSE_TOPIC = "/pose_raw"
 """Topic of the reconstructed poses (`samba.PoseRaw` JSON: `joints` 13 x [x, y, z] meters)."""

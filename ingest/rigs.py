@@ -10,7 +10,7 @@ prefix such as `mixamorig:`. Anything else is mapped by a TOML file:
     [joints]
     head = "Head"
     l_shoulder = "L_UpperArm"
-    ...                        # all 13 joints of samba.skeleton.JOINT_NAMES
+    ...                        # all 13 joints of samba.body.skeleton.JOINT_NAMES
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from ingest.errors import RigError
-from samba.skeleton import JOINT_NAMES
+from samba.ingest.errors import RigError
+
+from samba.body.skeleton import JOINT_NAMES
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,6 @@ This package owns no sockets and no foreign file formats; `db`, `ingest`, `expor
 `service` build on it.
 """
 
-from samba.errors import InputError, SambaError
+from samba.base.errors import InputError, SambaError
 
 __all__ = ["InputError", "SambaError"]

@@ -1,9 +1,9 @@
 """`samba calibrate`: calibrate a group of cameras from synchronised images of a board.
 
 Each positional argument is one camera: a folder of images or a video file
-(`samba.frame_source`); frame n of every camera is the same instant. The board is found
-in every frame (`samba.calibration_board`), the cameras are calibrated jointly
-(`samba.calibration`) and written as a calibration file (`samba.calibration_file`).
+(`samba.cameras.frame_source`); frame n of every camera is the same instant. The board is found
+in every frame (`samba.cameras.calibration_board`), the cameras are calibrated jointly
+(`samba.cameras.calibration`) and written as a calibration file (`samba.cameras.calibration_file`).
 A camera is named after its folder or video file (without the extension).
 """
 
@@ -16,12 +16,12 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from samba.calibration import MIN_VIEWS, WORLDS, CalibrationResult, calibrate
-from samba.calibration_board import BOARD_SPEC_HELP, Board, BoardView, parse_board
-from samba.calibration_file import write_calibration
-from samba.cli_arguments import natural, positive
-from samba.errors import InputError
-from samba.frame_source import FrameSource, open_frames
+from samba.base.arguments import natural, positive
+from samba.base.errors import InputError
+from samba.cameras.calibration import MIN_VIEWS, WORLDS, CalibrationResult, calibrate
+from samba.cameras.calibration_board import BOARD_SPEC_HELP, Board, BoardView, parse_board
+from samba.cameras.calibration_file import write_calibration
+from samba.cameras.frame_source import FrameSource, open_frames
 
 
 def register(parser: argparse.ArgumentParser) -> None:

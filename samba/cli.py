@@ -14,28 +14,37 @@ import os
 import sys
 from collections.abc import Sequence
 
-from samba.errors import SambaError
+from samba.base.errors import SambaError
 
 AREAS: dict[str, tuple[str, str]] = {
     "db": (
-        "ingest.cli",
+        "samba.ingest.cli",
         "pose database: init, import, ls, show, label, rm, verify, stats, tree, query",
     ),
-    "eval": ("samba.eval_cli", "accuracy and speed of every reconstruction method on BVH takes"),
+    "eval": (
+        "samba.evaluation.experiment",
+        "accuracy and speed of every reconstruction method on BVH takes",
+    ),
     "calibrate": ("samba.calibrate_cli", "calibrate cameras from images or videos of a board"),
-    "export": ("export.cli", "retarget takes to a humanoid avatar and write USD, glTF or BVH"),
-    "serve": ("service.serve_cli", "live capture server: packets in; VMC, viewer, takes out"),
-    "demo": ("service.demo", "a live capture end to end: server, two camera nodes, take, export"),
+    "export": (
+        "samba.export.cli",
+        "retarget takes to a humanoid avatar and write USD, glTF or BVH",
+    ),
+    "serve": ("samba.service.serve_cli", "live capture server: packets in; VMC, viewer, takes out"),
+    "demo": (
+        "samba.service.demo",
+        "a live capture end to end: server, two camera nodes, take, export",
+    ),
     "node": (
-        "service.node_cli",
+        "samba.service.node_cli",
         "camera node: track the 8 markers (or, markerless, the body) in frames, send them by UDP",
     ),
     "track-video": (
-        "service.track_video_cli",
+        "samba.service.track_video_cli",
         "markerless capture from one camera: silhouettes tracked over the shape tree, as a take",
     ),
     "capture-volume": (
-        "service.capture_volume_cli",
+        "samba.service.capture_volume_cli",
         "model-free capture from several cameras: visual hull, derived skeleton, BVH",
     ),
 }

@@ -5,11 +5,11 @@ One video or image folder per camera, in the order of the cameras in the calibra
 is read in lockstep (the take ends with the shortest). Each camera's empty stage comes
 from `--background` (one video or folder per camera) or from the first
 `--empty-frames` frames of its video. Every frame's silhouettes
-(`samba.silhouette_extraction`) are carved into a voxel volume (`samba.visual_hull`);
+(`samba.silhouette.extraction`) are carved into a voxel volume (`samba.volume.visual_hull`);
 the take runs from the first to the last frame with somebody in the volume. The
 volumes give a kinematic model common to the take and its joint angles
-(`samba.volume_capture`), written as BVH; with `--joints`, a human model's 13 capture
-joints (`samba.volume_humanoid`) go to a NumPy archive too.
+(`samba.volume.capture`), written as BVH; with `--joints`, a human model's 13 capture
+joints (`samba.volume.humanoid`) go to a NumPy archive too.
 """
 
 from __future__ import annotations
@@ -20,22 +20,22 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
+from samba.export.bvh_writer import UNITS, BvhSkeleton, write_bvh_motion
+from samba.service.track_video_cli import sized_frames
 
-from export.bvh_writer import UNITS, BvhSkeleton, write_bvh_motion
-from samba.atomic_file import atomic_path
-from samba.calibration_file import read_calibration
-from samba.camera import CameraGroup
-from samba.cli_arguments import finite_float, natural, positive, positive_float
-from samba.errors import InputError
-from samba.frame_kinematics import HUMAN_END_BRANCHES
-from samba.frame_source import open_frames
-from samba.silhouette_extraction import BACKGROUND_METHODS, SilhouetteExtractor
-from samba.skeleton import JOINT_NAMES
-from samba.visual_hull import VisualHull
-from samba.volume_capture import MIN_VOXELS, KinematicMotion, VolumeCapture, capture_volumes
-from samba.volume_humanoid import humanoid_joints
-from samba.voxel_grid import VoxelGrid
-from service.track_video_cli import sized_frames
+from samba.base.arguments import finite_float, natural, positive, positive_float
+from samba.base.atomic_file import atomic_path
+from samba.base.errors import InputError
+from samba.body.skeleton import JOINT_NAMES
+from samba.cameras.calibration_file import read_calibration
+from samba.cameras.camera import CameraGroup
+from samba.cameras.frame_source import open_frames
+from samba.silhouette.extraction import BACKGROUND_METHODS, SilhouetteExtractor
+from samba.volume.capture import MIN_VOXELS, KinematicMotion, VolumeCapture, capture_volumes
+from samba.volume.frame_kinematics import HUMAN_END_BRANCHES
+from samba.volume.humanoid import humanoid_joints
+from samba.volume.visual_hull import VisualHull
+from samba.volume.voxel_grid import VoxelGrid
 
 DEFAULT_BOUNDS = (-1.0, 0.0, -1.0, 1.0, 2.1, 1.0)
 """Capture volume (x0, y0, z0, x1, y1, z1) m: 2 x 2 m of floor, 2.1 m high."""

@@ -4,7 +4,7 @@
 |---|---|---|
 | `GET /api/health` | | `{"status": "ok", "sessions": n, "uptime_s": s}` |
 | `GET /api/sessions` | | `{"sessions": [session, ...]}` |
-| `POST /api/sessions` | a session config (`service.session_config`) | 201 `{"session": session}` |
+| `POST /api/sessions` | a session config (`session_config`) | 201 `{"session": session}` |
 | `GET /api/sessions/{name}` | | `{"session": session}` |
 | `DELETE /api/sessions/{name}` | | `{"stopped": name}` (a recording take is finished) |
 | `POST /api/sessions/{name}/takes` | optional `{"name": take}` | 201 `{"take": take}` |
@@ -17,7 +17,7 @@ Errors answer `{"error": message}` with 400 (bad request body or value), 401 (to
 
 With a token, every request must carry it, as `Authorization: Bearer <token>` or as a
 `token` query parameter (which the viewer page passes on to its WebSocket); the server
-refuses to bind the API anywhere but loopback without one (`service.serve`).
+refuses to bind the API anywhere but loopback without one (`samba.service.serve`).
 """
 
 from __future__ import annotations
@@ -31,11 +31,11 @@ from pathlib import Path
 from typing import Any
 
 from aiohttp import web
+from samba.service.errors import ServiceError
+from samba.service.server import CaptureServer
+from samba.service.session_config import SessionConfig
 
-from samba.errors import SambaError
-from service.errors import ServiceError
-from service.server import CaptureServer
-from service.session_config import SessionConfig
+from samba.base.errors import SambaError
 
 SERVER_KEY = web.AppKey("capture_server", CaptureServer)
 STARTED_KEY = web.AppKey("started", float)

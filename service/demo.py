@@ -1,7 +1,7 @@
 """`samba demo`: a whole live capture on this machine, start to finish, in one command.
 
 1. A pose database: built from the built-in synthetic motions (or `--db STORE`).
-2. The live server (`service.serve.LiveServer`) on loopback: UDP for camera packets, the
+2. The live server (`samba.service.serve.LiveServer`) on loopback: UDP for camera packets, the
    viewer and control API on HTTP, VMC to `--vmc` (default the VMC marionette port
    39539, where VSeeFace / EVMC4U listen) and to a receiver of its own that counts what
    arrives.
@@ -25,22 +25,22 @@ import webbrowser
 from pathlib import Path
 
 import numpy as np
+from samba.db.store import PoseStore
+from samba.db.synthetic_store import build_synthetic_store
+from samba.export.cli import load_avatar, write
+from samba.export.retarget import retarget
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.ingest.mcap_take import read_take
+from samba.service.serve import LiveServer
+from samba.service.session import CaptureSession
+from samba.service.session_config import SessionConfig
+from samba.service.synthetic_capture import SyntheticCapture, play
+from samba.service.udp_input import UdpInput
+from samba.service.vmc import MARIONETTE_PORT
 
-from db.store import PoseStore
-from db.synthetic_store import build_synthetic_store
-from export.cli import load_avatar, write
-from export.retarget import retarget
-from ingest.bvh_take import BvhImportOptions, load_bvh_take
-from ingest.mcap_take import read_take
-from samba.calibration_file import write_calibration
-from samba.cli_arguments import address, positive_float
-from samba.synthetic import MOTIONS
-from service.serve import LiveServer
-from service.session import CaptureSession
-from service.session_config import SessionConfig
-from service.synthetic_capture import SyntheticCapture, play
-from service.udp_input import UdpInput
-from service.vmc import MARIONETTE_PORT
+from samba.base.arguments import address, positive_float
+from samba.cameras.calibration_file import write_calibration
+from samba.synthetic.motions import MOTIONS
 
 SESSION = "demo"
 DRAIN_S = 10.0

@@ -1,14 +1,14 @@
 """`FramePipeline`: what a capture session computes for each frame.
 
 From the marker pixels of a frame's cameras (`CameraMarkers`): find the labels the nodes
-lost (`samba.stage_tracking`, unless the session keeps the nodes' labels), undistort
+lost (`samba.markers.stage_tracking`, unless the session keeps the nodes' labels), undistort
 the labels, triangulate the 8 markers (DLT with outlier gating), reconstruct the 13
 joints with the session's pose database and method
-(`samba.reconstruction.Reconstructor.step`, the same code as the offline
-reconstruction), retarget them to the avatar (`export.live_retarget`) and hand the VMC
+(`samba.reconstruct.reconstruction.Reconstructor.step`, the same code as the offline
+reconstruction), retarget them to the avatar (`samba.export.live_retarget`) and hand the VMC
 bundles to the network. It holds all of a session's CPU work and none of its
 bookkeeping, so a server can run it beside its event loop in a worker process
-(`service.pipeline_workers`); `service.session.CaptureSession` keeps the rest.
+(`samba.service.pipeline_workers`); `samba.service.session.CaptureSession` keeps the rest.
 `process_together` computes one frame each of several sessions that share their pose
 index and method with one batched reconstruction and one batched retargeting.
 
@@ -23,20 +23,24 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from samba.export.avatar_file import read_avatar_rig
+from samba.export.humanoid import HumanoidRig
+from samba.export.live_retarget import LiveRetarget, retarget_together
+from samba.service.session_config import SessionConfig
+from samba.service.session_indexes import SessionIndexes
+from samba.service.vmc import VmcSender, frame_bundles, unity_values
 
-from export.avatar_file import read_avatar_rig
-from export.humanoid import HumanoidRig
-from export.live_retarget import LiveRetarget, retarget_together
-from samba.calibration_file import read_calibration
-from samba.cross_view_labels import CrossViewSettings
-from samba.methods import method
-from samba.reconstruction import PoseEstimate, ReconstructionConfig, reconstruct_together
-from samba.skeleton import N_MARKERS
-from samba.stage_tracking import StageTracker
-from samba.triangulation import Triangulation
-from service.session_config import SessionConfig
-from service.session_indexes import SessionIndexes
-from service.vmc import VmcSender, frame_bundles, unity_values
+from samba.body.skeleton import N_MARKERS
+from samba.cameras.calibration_file import read_calibration
+from samba.cameras.triangulation import Triangulation
+from samba.markers.cross_view_labels import CrossViewSettings
+from samba.markers.stage_tracking import StageTracker
+from samba.reconstruct.methods import method
+from samba.reconstruct.reconstruction import (
+    PoseEstimate,
+    ReconstructionConfig,
+    reconstruct_together,
+)
 
 PREPARED_MISSING = 2
 """A session prepares the pose index for up to this many missing markers when it opens
@@ -253,8 +257,8 @@ takes them."""
 def process_together(jobs: Sequence[FrameJob]) -> list[FrameOutput | Exception]:
     """Compute one frame each of distinct marker sessions whose pipelines share a
     `reconstruction_key`, with the reconstructions in one batch
-    (`samba.reconstruction.reconstruct_together`) and the retargeting in another
-    (`export.live_retarget.retarget_together`): the same outputs as one at a time, four
+    (`samba.reconstruct.reconstruction.reconstruct_together`) and the retargeting in another
+    (`samba.export.live_retarget.retarget_together`): the same outputs as one at a time, four
     frames for about twice the cost of one. Outputs come in the jobs' order; each
     frame's latency runs to the moment its VMC bundles leave. A frame whose own steps
     (labelling, triangulation) raise comes back as the exception, and the others go on;

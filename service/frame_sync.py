@@ -59,7 +59,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 
-from service.packet import Packet, sequence_delta
+from samba.service.packet import Packet, sequence_delta
 
 RECENT_PACKETS = 256
 """(sequence, timestamp) pairs remembered per camera to spot duplicates and restarts."""

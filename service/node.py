@@ -1,25 +1,25 @@
 """The camera node of the live service: frames in, one marker packet per frame out (UDP).
 
 A node runs beside one camera of the capture stage. For every frame it finds the bright
-blobs (`samba.marker_detection`), keeps the 8 marker labels on them
-(`samba.marker_tracking`, started from the standard pose the subject holds when capture
-begins) and sends the labelled pixels to the server as one `service.packet.MarkerPacket`:
+blobs (`samba.markers.detection`), keeps the 8 marker labels on them
+(`samba.markers.tracking`, started from the standard pose the subject holds when capture
+begins) and sends the labelled pixels to the server as one `samba.service.packet.MarkerPacket`:
 camera id, frame sequence, capture timestamp, 8 x (u, v) with NaN for missing, and the
 blobs its tracker left unlabelled (at most `MAX_BLOBS`), from which a server that labels
 the markers itself finds lost labels again.
 
 Frames come from a feed, each frame a `Capture` with its capture time:
 
-- `FileFeed`: a video file or a folder of images (`samba.frame_source`), played in real
+- `FileFeed`: a video file or a folder of images (`samba.cameras.frame_source`), played in real
   time at its frame rate (the timestamp is the clock when the frame is taken) or as fast
   as possible (timestamp start + index / fps);
 - `WebcamFeed`: an OpenCV camera (timestamp: the clock when the frame is grabbed);
 - `SyntheticFeed`: one camera of the synthetic rig filming a built-in motion
-  (`samba.synthetic`) after the standing lead-in (`samba.lead_in`), rendered on the fly
-  (`samba.marker_render`). Its frames are captured on a wall-clock grid, frame i at
-  `start_at + i / fps`, and stamped with exactly that time, so that nodes of the same
-  rig started separately with the same motion, seed and start time film the same
-  subject at the same instants.
+  (`samba.synthetic.motions`) after the standing lead-in (`samba.markers.lead_in`),
+  rendered on the fly (`samba.markers.render`). Its frames are captured on a wall-clock
+  grid, frame i at `start_at + i / fps`, and stamped with exactly that time, so that
+  nodes of the same rig started separately with the same motion, seed and start time
+  film the same subject at the same instants.
 
 `run_node` drives a `CameraNode` with a feed and a `PacketSender` until the feed ends or
 Ctrl-C, and returns a `NodeSummary`. Timestamps are UNIX seconds (`time.time`).
@@ -38,18 +38,18 @@ from typing import Literal, Protocol, TextIO
 
 import cv2
 import numpy as np
+from samba.service.packet import MAX_BLOBS, MarkerPacket, PosePacket, encode
 
-from samba.camera import Camera
-from samba.camera_chain import EMPTY_STAGE_FRAMES
-from samba.errors import InputError
-from samba.frame_source import FrameSource, open_video
-from samba.lead_in import LeadIn, standing_lead_in
-from samba.marker_detection import detect_markers, static_mask
-from samba.marker_render import RenderOptions, film_empty_stage, render_camera
-from samba.marker_tracking import MarkerTracker
-from samba.skeleton import N_JOINTS, N_MARKERS
-from samba.synthetic import generate
-from service.packet import MAX_BLOBS, MarkerPacket, PosePacket, encode
+from samba.base.errors import InputError
+from samba.body.skeleton import N_JOINTS, N_MARKERS
+from samba.cameras.camera import Camera
+from samba.cameras.frame_source import FrameSource, open_video
+from samba.markers.camera_chain import EMPTY_STAGE_FRAMES
+from samba.markers.detection import detect_markers, static_mask
+from samba.markers.lead_in import LeadIn, standing_lead_in
+from samba.markers.render import RenderOptions, film_empty_stage, render_camera
+from samba.markers.tracking import MarkerTracker
+from samba.synthetic.motions import generate
 
 DEFAULT_PORT = 9870
 """The UDP port the server (`samba serve`) listens on for camera packets by default."""
@@ -121,7 +121,7 @@ class CameraNode:
     `camera` is the calibrated camera the frames come from (its image size is checked);
     `start` where the subject stands when capture begins; `mask` bool (H, W), True =
     static bright pixels to ignore, or None; `threshold` a fixed intensity or "auto"
-    (see `samba.marker_detection.detect_markers`). No label is sent on a blob that looks
+    (see `samba.markers.detection.detect_markers`). No label is sent on a blob that looks
     like two markers merged (`Blobs.merged`).
     """
 
@@ -254,7 +254,7 @@ class PacketSender:
 
 
 class FileFeed:
-    """The frames of a video file or an image folder (`samba.frame_source.open_frames`).
+    """The frames of a video file or an image folder (`samba.cameras.frame_source.open_frames`).
 
     `fps`: the frame rate (None: the video's own, `DEFAULT_FPS` for images). With `pace`
     frame k is taken at start + k / fps on the clock (sleeping until then) and stamped
@@ -334,7 +334,7 @@ class WebcamFeed:
 
 
 def synthetic_lead_in(motion: str, seconds: float, fps: float, seed: int) -> LeadIn:
-    """The take the synthetic rig films: `samba.synthetic.generate(motion, seconds, fps,
+    """The take the synthetic rig films: `samba.synthetic.motions.generate(motion, seconds, fps,
     seed)` after the standing lead-in (1 s: 0.5 s held, 0.5 s into the first pose).
     ValueError for an unknown motion or a take without frames."""
     return standing_lead_in(generate(motion, seconds, fps, seed).poses, fps)
@@ -463,7 +463,7 @@ def run_node(
 ) -> NodeSummary:
     """Process and send every capture until the feed ends or Ctrl-C; returns the summary.
 
-    `node` is a `CameraNode` (markers) or a `service.silhouette_node.SilhouetteNode`
+    `node` is a `CameraNode` (markers) or a `samba.service.silhouette_node.SilhouetteNode`
     (poses; a frame it has no pose for yet is counted, not sent). Packets carry
     sequence numbers from `start_sequence`, one per frame, wrapping from 2^32 - 1 to 0.
     The node's tracker restarts on every capture marked `first`. With a

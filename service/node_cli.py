@@ -1,10 +1,10 @@
-"""`samba node`: one camera node of the live service (`service.node`).
+"""`samba node`: one camera node of the live service (`samba.service.node`).
 
 Reads frames from exactly one source (a video file, an image folder, a webcam or one
 camera of the synthetic rig), detects and tracks the 8 markers and sends one UDP packet
 per frame to the server. With `--mode silhouette` the node is markerless: one ordinary
 camera, the subject's silhouette tracked over the shape tree of `--db`
-(`service.silhouette_node`), one pose packet per frame to a session whose input is
+(`samba.service.silhouette_node`), one pose packet per frame to a session whose input is
 "poses". `--camera N` is both the packet's camera id and the camera's
 place in the calibration file: the N-th camera table of the file, counted from 0.
 The run ends when the source does (never with `--loop` or a webcam) or on Ctrl-C, and
@@ -21,19 +21,8 @@ import time
 from collections.abc import Iterator
 
 import numpy as np
-
-from db.tree_cli import chosen_body, chosen_home, tree_for
-from samba.body_model import KINDS
-from samba.calibration_file import read_calibration
-from samba.camera import Camera
-from samba.cli_arguments import address, finite_float, natural, positive_float
-from samba.errors import InputError
-from samba.frame_source import open_frames
-from samba.silhouette_extraction import SilhouetteExtractor
-from samba.silhouette_view import SilhouetteView
-from samba.skeleton import N_MARKERS
-from samba.synthetic import MOTIONS
-from service.node import (
+from samba.db.tree_cli import chosen_body, chosen_home, tree_for
+from samba.service.node import (
     DEFAULT_FPS,
     DEFAULT_PORT,
     CameraNode,
@@ -46,8 +35,19 @@ from service.node import (
     run_node,
     synthetic_lead_in,
 )
-from service.packet import MIN_KEY_BYTES, MarkerPacket, read_key_file
-from service.silhouette_node import SilhouetteNode, SyntheticStageFeed
+from samba.service.packet import MIN_KEY_BYTES, MarkerPacket, read_key_file
+from samba.service.silhouette_node import SilhouetteNode, SyntheticStageFeed
+
+from samba.base.arguments import address, finite_float, natural, positive_float
+from samba.base.errors import InputError
+from samba.body.body_model import KINDS
+from samba.body.skeleton import N_MARKERS
+from samba.cameras.calibration_file import read_calibration
+from samba.cameras.camera import Camera
+from samba.cameras.frame_source import open_frames
+from samba.silhouette.extraction import SilhouetteExtractor
+from samba.silhouette.view import SilhouetteView
+from samba.synthetic.motions import MOTIONS
 
 START_DELAY_SECONDS = 0.5
 """How far ahead of now the synthetic capture starts when `--start-at` is not given."""

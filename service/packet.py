@@ -1,14 +1,14 @@
 """The camera-node → server wire format: one UDP datagram per camera frame.
 
 A camera node sends, for each frame, the 8 labelled marker positions its tracker found
-(`samba.marker_tracking`) and the blobs its tracker left unlabelled as one
+(`samba.markers.tracking`) and the blobs its tracker left unlabelled as one
 `MarkerPacket`. `encode` and `decode` turn it into bytes
 and back; `decode` raises `PacketError` (and nothing else) on any datagram it drops,
 with a `reason` from a small fixed set the server counts drops by.
 
 A markerless node (`samba node --mode silhouette`) tracks the whole body itself and
 sends a `PosePacket` instead: the same header with flags bit 1 set, and the 13 joints
-(world meters, +Y up, `samba.skeleton.JOINT_NAMES` order) where the markers would be.
+(world meters, +Y up, `samba.body.skeleton.JOINT_NAMES` order) where the markers would be.
 
 Layout (version 1, little-endian, no padding; 100 bytes, plus 1 + 8 n with n unlabelled
 blobs, plus 16 with the tag; a pose packet 192 bytes, 208 with the tag):
@@ -31,11 +31,11 @@ Here b = 1 + 8n with blobs, else 0; the tag is the first 16 bytes of the HMAC. I
 packet the 156 bytes from offset 36 are the pose, float32[13][3], all finite, flags bit
 2 is 0 and the tag follows at offset 192.
 
-Markers follow `samba.skeleton.MARKER_NAMES` (l/r shoulder, l/r wrist, l/r knee, l/r foot)
+Markers follow `samba.body.skeleton.MARKER_NAMES` (l/r shoulder, l/r wrist, l/r knee, l/r foot)
 with pixels in the OpenCV convention. A missing marker has both coordinates NaN; a
 marker with one NaN coordinate or an infinite one is invalid. The blobs are bright spots
 the node's tracker did not label (a marker whose label it lost, or a stray reflection):
-a server that labels the markers itself (`samba.stage_tracking`) uses them with the
+a server that labels the markers itself (`samba.markers.stage_tracking`) uses them with the
 labelled ones; a packet without blobs has flags bit 2 clear and ends after the markers,
 exactly as a node that sends none always did. The timestamp must be finite. The session
 id lets a server ignore nodes still streaming for another capture stage or an earlier
@@ -70,9 +70,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from samba.service.errors import PacketError, ServiceError
 
-from samba.skeleton import N_JOINTS, N_MARKERS
-from service.errors import PacketError, ServiceError
+from samba.body.skeleton import N_JOINTS, N_MARKERS
 
 MAGIC = b"SMBA"
 VERSION = 1

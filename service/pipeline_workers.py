@@ -14,7 +14,7 @@ construction:
   several cores — the Python interpreter runs one thread at a time.
 
 Frames submitted inside a runner's `together()` block are held to its end and computed
-together (`service.frame_pipeline.process_together`: one batch for the sessions that
+together (`samba.service.frame_pipeline.process_together`: one batch for the sessions that
 share their reconstruction, which sessions on one database do through the runner's
 `SessionIndexes`); the server wraps each read of its socket in one.
 
@@ -38,11 +38,8 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any, Generic, TypeVar
 
-from threadpoolctl import threadpool_limits
-
-from samba.errors import InputError
-from service.errors import ServiceError
-from service.frame_pipeline import (
+from samba.service.errors import ServiceError
+from samba.service.frame_pipeline import (
     FrameInput,
     FrameOutput,
     FramePipeline,
@@ -50,8 +47,11 @@ from service.frame_pipeline import (
     open_pipeline,
     process_together,
 )
-from service.session_config import SessionConfig
-from service.session_indexes import SessionIndexes
+from samba.service.session_config import SessionConfig
+from samba.service.session_indexes import SessionIndexes
+from threadpoolctl import threadpool_limits
+
+from samba.base.errors import InputError
 
 LOG = logging.getLogger(__name__)
 
@@ -128,7 +128,7 @@ class InlinePipelines:
     def together(self) -> AbstractContextManager[None]:
         """Hold the frames submitted in the block and compute them together at its end:
         those of sessions that share their reconstruction in one batch
-        (`service.frame_pipeline.process_together`)."""
+        (`samba.service.frame_pipeline.process_together`)."""
         return self._hold.block()
 
     def _deliver_computed(self, frames: list[_Frame]) -> None:
@@ -207,7 +207,7 @@ class WorkerPipelines:
     def together(self) -> AbstractContextManager[None]:
         """Hold the frames submitted in the block and send them at its end, one message
         per worker, which computes them together: those of sessions that share their
-        reconstruction in one batch (`service.frame_pipeline.process_together`)."""
+        reconstruction in one batch (`samba.service.frame_pipeline.process_together`)."""
         return self._hold.block()
 
     def _send_held(self, held: list[tuple[_Worker, _Frame]]) -> None:

@@ -1,12 +1,12 @@
 """`LiveServer`: `samba serve` as one asyncio object — sessions, UDP input, timer, HTTP.
 
 The camera datagrams are read and assembled into frames in the event loop
-(`service.udp_input`, `service.server`); a single timer resolves frames whose wait for
+(`samba.service.udp_input`, `samba.service.server`); a single timer resolves frames whose wait for
 late cameras ran out. The frames are computed in `workers` worker processes
-(`service.pipeline_workers.WorkerPipelines`), or in the event loop when `workers` is 0;
+(`samba.service.pipeline_workers.WorkerPipelines`), or in the event loop when `workers` is 0;
 results come back to the loop, which records them and feeds the viewer.
-The HTTP side (aiohttp) serves the control API (`service.control_api`) and the live
-viewer (`service.viewer`) on one port. The API is bound to 127.0.0.1 by default;
+The HTTP side (aiohttp) serves the control API (`samba.service.control_api`) and the live
+viewer (`samba.service.viewer`) on one port. The API is bound to 127.0.0.1 by default;
 binding it to any other address requires a token.
 """
 
@@ -22,15 +22,15 @@ from pathlib import Path
 from types import TracebackType
 
 from aiohttp import web
+from samba.service.control_api import add_control_routes, token_middleware
+from samba.service.errors import ServiceError
+from samba.service.pipeline_workers import FrameDone, WorkerPipelines
+from samba.service.server import CaptureServer
+from samba.service.session_config import SessionConfig
+from samba.service.udp_input import UdpInput
+from samba.service.viewer import ViewerHub, add_viewer_routes
 
-from samba.calibration_file import read_calibration
-from service.control_api import add_control_routes, token_middleware
-from service.errors import ServiceError
-from service.pipeline_workers import FrameDone, WorkerPipelines
-from service.server import CaptureServer
-from service.session_config import SessionConfig
-from service.udp_input import UdpInput
-from service.viewer import ViewerHub, add_viewer_routes
+from samba.cameras.calibration_file import read_calibration
 
 UDP_PORT = 9870
 """Default UDP port camera nodes send to."""

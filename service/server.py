@@ -1,14 +1,14 @@
 """`CaptureServer`: the capture sessions of one server and the routing of datagrams to them.
 
-No sockets here (`service.udp_input` reads them, `service.serve` runs everything):
+No sockets here (`samba.service.udp_input` reads them, `samba.service.serve` runs everything):
 `receive` takes one datagram with the wall-clock time it arrived, decodes it
-(`service.packet.decode`, with the shared key when one is set) and hands the packet to
+(`samba.service.packet.decode`, with the shared key when one is set) and hands the packet to
 the session its session id names — or, when the id is empty, to the only session. A
 datagram that is dropped is counted by reason: a `PacketError` reason, "unknown
 session", or "wrong input" (marker packets to a poses session, or the other way round).
 Nothing a sender does raises out of `receive`.
 
-The sessions' frames are computed by `pipelines` (`service.pipeline_workers`; by
+The sessions' frames are computed by `pipelines` (`samba.service.pipeline_workers`; by
 default `InlinePipelines`, in the caller's thread); whatever runs them hands each
 result to `deliver`, which passes it to its session.
 """
@@ -21,12 +21,12 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
-from service.errors import PacketError, ServiceError
-from service.packet import decode
-from service.pipeline_workers import FrameDone, InlinePipelines
-from service.session import CaptureSession, Pipelines
-from service.session_config import SessionConfig
-from service.viewer import ViewerHub
+from samba.service.errors import PacketError, ServiceError
+from samba.service.packet import decode
+from samba.service.pipeline_workers import FrameDone, InlinePipelines
+from samba.service.session import CaptureSession, Pipelines
+from samba.service.session_config import SessionConfig
+from samba.service.viewer import ViewerHub
 
 UNKNOWN_SESSION = "unknown session"
 """Drop reason of a valid packet whose session id names no session."""

@@ -4,7 +4,7 @@ Per frame assembled by `FrameSync` (one packet per camera, or at least `min_came
 after waiting `wait_ms`), the session hands the cameras' marker pixels, labelled and
 unlabelled (`CameraMarkers`), to its `FramePipeline` (labelling, triangulation,
 reconstruction, retargeting, VMC out; in the event loop
-or in a worker process, see `service.pipeline_workers`). A session whose `input` is
+or in a worker process, see `samba.service.pipeline_workers`). A session whose `input` is
 "poses" takes the pose packets of one markerless node instead (whatever camera id it
 sends), and its `PosePipeline` only retargets and sends them. When the computed frame comes
 back (`complete`), the session counts it, sends it to the viewer and writes it to the
@@ -27,17 +27,17 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+from samba.service.errors import ServiceError
+from samba.service.frame_pipeline import CameraMarkers, FrameInput, FrameOutput
+from samba.service.frame_sync import FrameSync, SyncedFrame
+from samba.service.metrics import LabelCounts, LatencyWindow
+from samba.service.packet import Packet, PosePacket
+from samba.service.session_config import SessionConfig
+from samba.service.take_recorder import TakeRecorder
+from samba.service.viewer import ViewerHub, frame_message
 
-from samba.calibration_file import read_calibration
-from samba.skeleton import N_MARKERS
-from service.errors import ServiceError
-from service.frame_pipeline import CameraMarkers, FrameInput, FrameOutput
-from service.frame_sync import FrameSync, SyncedFrame
-from service.metrics import LabelCounts, LatencyWindow
-from service.packet import Packet, PosePacket
-from service.session_config import SessionConfig
-from service.take_recorder import TakeRecorder
-from service.viewer import ViewerHub, frame_message
+from samba.body.skeleton import N_MARKERS
+from samba.cameras.calibration_file import read_calibration
 
 LOG = logging.getLogger(__name__)
 
@@ -46,7 +46,7 @@ TAKE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 
 
 class Pipelines(Protocol):
-    """Where sessions' frames are computed (`service.pipeline_workers`)."""
+    """Where sessions' frames are computed (`samba.service.pipeline_workers`)."""
 
     def open(self, config: SessionConfig, clock_zero: float) -> int: ...
 

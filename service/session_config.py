@@ -26,7 +26,7 @@ needs neither (`method`, `min_cameras`, `gate_px` and `labels` do not apply).
 
 With `labels = "server"` the server keeps the labels the nodes sent and
 finds the ones they lost again from every camera's blobs (labelled and unlabelled),
-with a tracker per camera and the cross-view labelling (`samba.stage_tracking`), started
+with a tracker per camera and the cross-view labelling (`samba.markers.stage_tracking`), started
 at the first frame every camera sent: a marker whose label a node dropped when it
 crossed another comes back as soon as the other cameras tell which marker it is, and a
 label whose views disagree is dropped. It costs the server about 2 ms per camera and
@@ -47,9 +47,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from samba.cli_arguments import address
-from samba.methods import METHODS
-from service.errors import ServiceError
+from samba.service.errors import ServiceError
+
+from samba.base.arguments import address
+from samba.reconstruct.methods import METHODS
 
 SESSION_NAME = re.compile(r"[A-Za-z0-9._-]{1,16}")
 """A session's name: what camera nodes put in their packets' session field."""

@@ -5,7 +5,7 @@ generation: an import in between makes a new snapshot) with the same kind of ind
 (the store's own, or one with the mirror images for methods with `mirrored_database`)
 share one loaded index. It is read, and its masked tables made, once. The frames of
 such sessions that arrive together are reconstructed in one batch
-(`service.frame_pipeline.process_together`). An index goes when the last session that
+(`samba.service.frame_pipeline.process_together`). An index goes when the last session that
 searches it closes.
 """
 
@@ -16,10 +16,10 @@ import weakref
 from pathlib import Path
 
 import numpy as np
+from samba.db.index import PoseIndex
+from samba.db.store import PoseStore
 
-from db.index import PoseIndex
-from db.store import PoseStore
-from samba.skeleton import mirror_poses
+from samba.body.skeleton import mirror_poses
 
 
 class SessionIndexes:

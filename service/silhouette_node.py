@@ -2,14 +2,14 @@
 subject's silhouette tracked over the pose store's shape tree, one pose packet per frame.
 
 `SilhouetteNode` turns colour frames into 13-joint poses: background subtraction
-(`samba.silhouette_extraction`), the silhouette at the view's 320x240, and the
-tree-based filter (`samba.silhouette_tracker`). The server takes its pose packets in a
+(`samba.silhouette.extraction`), the silhouette at the view's 320x240, and the
+tree-based filter (`samba.silhouette.tracker`). The server takes its pose packets in a
 session whose `input` is "poses" and streams the avatar like any other.
 
 `SyntheticStageFeed` is the synthetic rig of this mode: the body model in a built-in
 motion (staged in front of the camera, facing it when it starts) in colour on a
-textured wall (`samba.person_render`), on a wall-clock grid like
-`service.node.SyntheticFeed`.
+textured wall (`samba.silhouette.person_render`), on a wall-clock grid like
+`samba.service.node.SyntheticFeed`.
 """
 
 from __future__ import annotations
@@ -17,17 +17,17 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import numpy as np
+from samba.service.node import Capture, grid_captures
 
-from samba.body_model import BodyModel
-from samba.camera import Camera
-from samba.person_render import person_frames, stage_background
-from samba.shape_tree import ShapeTree
-from samba.silhouette_distance import downsampled
-from samba.silhouette_evaluation import staged
-from samba.silhouette_extraction import SilhouetteExtractor
-from samba.silhouette_tracker import SilhouetteTracker
-from samba.synthetic import generate
-from service.node import Capture, grid_captures
+from samba.body.body_model import BodyModel
+from samba.cameras.camera import Camera
+from samba.silhouette.distance import downsampled
+from samba.silhouette.evaluation import staged
+from samba.silhouette.extraction import SilhouetteExtractor
+from samba.silhouette.person_render import person_frames, stage_background
+from samba.silhouette.shape_tree import ShapeTree
+from samba.silhouette.tracker import SilhouetteTracker
+from samba.synthetic.motions import generate
 
 
 class SilhouetteNode:
@@ -74,9 +74,9 @@ class SilhouetteNode:
 
 
 class SyntheticStageFeed:
-    """The body model `body` doing `motion` (`samba.synthetic.generate(motion, seconds,
+    """The body model `body` doing `motion` (`samba.synthetic.motions.generate(motion, seconds,
     fps, seed)`), staged facing `camera` at the tree's home, filmed in colour at `fps` on
-    a wall-clock grid from `start_at` (see `service.node.SyntheticFeed`)."""
+    a wall-clock grid from `start_at` (see `samba.service.node.SyntheticFeed`)."""
 
     def __init__(
         self,

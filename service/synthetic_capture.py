@@ -1,7 +1,7 @@
 """A synthetic capture as camera nodes would report it, and a player that sends it live.
 
-`SyntheticCapture.film` generates a built-in motion (`samba.synthetic`), places
-cameras around it (`samba.observation.spread_cameras`) and projects the 8 markers into
+`SyntheticCapture.film` generates a built-in motion (`samba.synthetic.motions`), places
+cameras around it (`samba.markers.observation.spread_cameras`) and projects the 8 markers into
 every camera with Gaussian pixel noise and random dropout — the labelled pixels a
 camera node's tracker outputs, without rendering images (which `samba node
 --synthetic` does). `play` sends those pixels as UDP packets on a wall-clock grid:
@@ -19,13 +19,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from samba.service.packet import MarkerPacket, encode
 
-from samba.camera import CameraGroup
-from samba.observation import spread_cameras
-from samba.skeleton import markers_of
-from samba.synthetic import generate
-from samba.take import Take
-from service.packet import MarkerPacket, encode
+from samba.body.skeleton import markers_of
+from samba.body.take import Take
+from samba.cameras.camera import CameraGroup
+from samba.markers.observation import spread_cameras
+from samba.synthetic.motions import generate
 
 
 @dataclass(frozen=True, eq=False)

@@ -15,7 +15,7 @@ Topics, all JSON with a JSON schema, log times in nanoseconds of each frame's ca
 
 Take facts (name, fps, start time) go in the `take` metadata record. The file is
 append-only: chunks are small and flushed about every second, so a killed recorder
-leaves a prefix that `ingest.mcap_take.read_take` recovers.
+leaves a prefix that `samba.ingest.mcap_take.read_take` recovers.
 """
 
 from __future__ import annotations
@@ -31,13 +31,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from mcap.writer import Writer
+from samba.ingest.mcap_take import POSE_TOPIC, TAKE_METADATA
+from samba.service.errors import ServiceError
 
-from ingest.mcap_take import POSE_TOPIC, TAKE_METADATA
-from samba.skeleton import BONES, JOINT_NAMES, N_JOINTS, N_MARKERS, TORSO_EDGES
-from service.errors import ServiceError
+from samba.body.skeleton import BONES, JOINT_NAMES, N_JOINTS, N_MARKERS, TORSO_EDGES
 
 if TYPE_CHECKING:
-    from samba.reconstruction import PoseEstimate
+    from samba.reconstruct.reconstruction import PoseEstimate
 
 
 FRAME_ID = "mocap"

@@ -3,7 +3,7 @@ one ordinary camera (silhouette tracking over the store's shape tree), written a
 
 The empty stage comes from `--background` (a video or image folder of the stage without
 the subject) or from the first `--empty-frames` frames of VIDEO. Each frame's
-silhouette (`samba.silhouette_extraction`) is tracked with `samba.silhouette_tracker`;
+silhouette (`samba.silhouette.extraction`) is tracked with `samba.silhouette.tracker`;
 the 13-joint poses go to an MCAP take like the live service's, which `samba export`
 and `samba db import` read. The shape tree is read from the store
 (`samba db tree`), and built and saved there first when it is missing.
@@ -18,19 +18,25 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+from samba.db.tree_cli import (
+    add_camera_arguments,
+    chosen_body,
+    chosen_camera,
+    chosen_home,
+    tree_for,
+)
+from samba.service.take_recorder import TakeRecorder
 
-from db.tree_cli import add_camera_arguments, chosen_body, chosen_camera, chosen_home, tree_for
-from samba.camera import Camera
-from samba.cli_arguments import natural, positive_float
-from samba.errors import InputError
-from samba.frame_source import open_frames
-from samba.reconstruction import PoseEstimate
-from samba.silhouette_distance import downsampled
-from samba.silhouette_extraction import BACKGROUND_METHODS, SilhouetteExtractor
-from samba.silhouette_tracker import SilhouetteTracker
-from samba.silhouette_view import SilhouetteView
-from samba.skeleton import N_MARKERS
-from service.take_recorder import TakeRecorder
+from samba.base.arguments import natural, positive_float
+from samba.base.errors import InputError
+from samba.body.skeleton import N_MARKERS
+from samba.cameras.camera import Camera
+from samba.cameras.frame_source import open_frames
+from samba.reconstruct.reconstruction import PoseEstimate
+from samba.silhouette.distance import downsampled
+from samba.silhouette.extraction import BACKGROUND_METHODS, SilhouetteExtractor
+from samba.silhouette.tracker import SilhouetteTracker
+from samba.silhouette.view import SilhouetteView
 
 
 def register(parser: argparse.ArgumentParser) -> None:

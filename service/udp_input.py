@@ -22,7 +22,7 @@ import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 
-from service.packet import MAX_PACKET_BYTES
+from samba.service.packet import MAX_PACKET_BYTES
 
 SO_TIMESTAMPNS = 35
 """Linux socket option (and control message type) of nanosecond receive timestamps."""

@@ -22,10 +22,9 @@ from collections.abc import Iterable
 import numpy as np
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
-
-from export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
-from export.motion import HumanoidMotion
-from service.errors import ServiceError
+from samba.export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
+from samba.export.motion import HumanoidMotion
+from samba.service.errors import ServiceError
 
 MARIONETTE_PORT = 39539
 """The UDP port VMC marionettes (receivers) listen on by default."""

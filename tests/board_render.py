@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from samba.calibration_board import Board
-from samba.camera import Camera
+from samba.cameras.calibration_board import Board
+from samba.cameras.camera import Camera
 
 SIZE = (640, 480)
 SUPERSAMPLE = 2

@@ -73,7 +73,7 @@ MAPPED_KEYS = (
     "l_ankle",
     "r_ankle",
 )
-"""Skeleton keys of Samba's 13 joints, in `samba.skeleton.JOINT_NAMES` order."""
+"""Skeleton keys of Samba's 13 joints, in `samba.body.skeleton.JOINT_NAMES` order."""
 
 _SIDED = ("collar", "shoulder", "elbow", "wrist", "hip", "knee", "ankle", "toe")
 
@@ -127,7 +127,7 @@ RIG_NAMES: dict[str, dict[str, str]] = {
         ),
     ),
 }
-"""Joint names of the test skeleton in each built-in rig of `ingest.rigs.BUILTIN_RIGS`."""
+"""Joint names of the test skeleton in each built-in rig of `samba.ingest.rigs.BUILTIN_RIGS`."""
 
 
 def rig_names(rig: str | Mapping[str, str]) -> dict[str, str]:
@@ -147,7 +147,7 @@ class HumanoidFixture:
     """A generated BVH file and what a correct importer must make of it.
 
     `names` are the file's joint names in hierarchy order, End Sites named
-    '<parent>_end' as `ingest.bvh` names them; `file_positions` (n, J, 3) their world
+    '<parent>_end' as `samba.ingest.bvh` names them; `file_positions` (n, J, 3) their world
     positions in the file's units and axes; `positions` (n, 13, 3) Samba's 13 joints in
     meters, right-handed, +Y up (before any mirroring), with the lower ankle at y = 0
     when the root has position channels; `leg` the hip-to-ankle length in file units.

@@ -8,12 +8,12 @@ import os
 from pathlib import Path
 
 import pytest
+from samba.db.synthetic_store import build_synthetic_store
+from samba.service.synthetic_capture import SyntheticCapture
 from silhouette_fixtures import SmallBuild, build_small_tree
 
-from db.synthetic_store import build_synthetic_store
-from samba.calibration_file import write_calibration
-from samba.shape_tree import ShapeTree
-from service.synthetic_capture import SyntheticCapture
+from samba.cameras.calibration_file import write_calibration
+from samba.silhouette.shape_tree import ShapeTree
 
 ROOT = Path(__file__).resolve().parents[1]
 

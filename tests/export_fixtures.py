@@ -5,14 +5,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from samba.export.avatar_mesh import AvatarMesh
+from samba.export.humanoid import N_BONES, TIP_BONES, HumanoidRig
+from samba.export.motion import HumanoidMotion
+from samba.export.retarget import retarget
+from samba.ingest.bvh_take import load_bvh_take
 
-from export.avatar_mesh import AvatarMesh
-from export.humanoid import N_BONES, TIP_BONES, HumanoidRig
-from export.motion import HumanoidMotion
-from export.retarget import retarget
-from ingest.bvh_take import load_bvh_take
-from samba import synthetic
-from samba.take import Take
+from samba.body.take import Take
+from samba.synthetic import motions as synthetic
 
 RIG_FAMILIES = ("cgspeed", "daz", "iclone")
 """Prefixes of the shared CMU files; the tests export the first file of each."""

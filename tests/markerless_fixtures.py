@@ -1,6 +1,6 @@
 """The synthetic stage of the `samba db tree` and `samba track-video` tests: one 640x480
 camera 3.6 m in front of home, a subject of 1.75 m (the men's-L body model), and colour
-footage of a held-out take (`samba.person_render`) written as an image folder or an
+footage of a held-out take (`samba.silhouette.person_render`) written as an image folder or an
 MJPG video.
 
 `footage` renders once per test session (about 2 s); the files are written per test
@@ -16,13 +16,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from samba.body_model import BodyModel
-from samba.calibration_file import write_calibration
-from samba.camera import Camera, CameraGroup
-from samba.person_render import person_frames, stage_background
-from samba.silhouette_evaluation import staged
-from samba.silhouette_view import SilhouetteView
-from samba.synthetic import generate
+from samba.body.body_model import BodyModel
+from samba.cameras.calibration_file import write_calibration
+from samba.cameras.camera import Camera, CameraGroup
+from samba.silhouette.evaluation import staged
+from samba.silhouette.person_render import person_frames, stage_background
+from samba.silhouette.view import SilhouetteView
+from samba.synthetic.motions import generate
 
 CAMERA = Camera.look_at("front", (0.0, 1.2, 3.6), (0.0, 0.9, 0.0), (640, 480), 55.0)
 HEIGHT = 1.75

@@ -12,12 +12,12 @@ from functools import cache
 
 import numpy as np
 
-from samba.body_model import BodyModel, scaled_to
-from samba.camera import Camera
-from samba.pose_selection import turned
-from samba.shape_tree import ShapeTree, at_home, facing
-from samba.silhouette_view import SilhouetteView
-from samba.synthetic import library
+from samba.body.body_model import BodyModel, scaled_to
+from samba.cameras.camera import Camera
+from samba.silhouette.pose_selection import turned
+from samba.silhouette.shape_tree import ShapeTree, at_home, facing
+from samba.silhouette.view import SilhouetteView
+from samba.synthetic.motions import library
 
 CAMERA = Camera.look_at("cam", (0.0, 1.1, 3.0), (0.0, 0.9, 0.0), (320, 240), 55.0)
 HOME = np.array([0.0, 0.0, 0.0])
@@ -27,12 +27,12 @@ HEADINGS = np.arange(-180.0, 180.0, 60.0)
 TAKE_FRAMES = 20
 """Poses per take of `library_poses` (2 s at 10 fps)."""
 SQUAT_TAKE = 4
-"""Index of the squat in `samba.synthetic.MOTIONS` (a take that stays in place)."""
+"""Index of the squat in `samba.synthetic.motions.MOTIONS` (a take that stays in place)."""
 
 
 def library_poses() -> np.ndarray:
     """The database poses (200, 13, 3) meters: one 2 s take of every synthetic motion at
-    10 fps, in `samba.synthetic.MOTIONS` order (`TAKE_FRAMES` poses each)."""
+    10 fps, in `samba.synthetic.motions.MOTIONS` order (`TAKE_FRAMES` poses each)."""
     return np.concatenate([take.poses for take in library(1, 2.0, 10.0, seed=1)])
 
 

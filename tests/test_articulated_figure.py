@@ -1,4 +1,4 @@
-"""Tests of the synthetic creatures of `samba.articulated_figure`."""
+"""Tests of the synthetic creatures of `samba.volume.articulated_figure`."""
 
 from __future__ import annotations
 
@@ -7,15 +7,15 @@ import pytest
 from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
-from samba.articulated_figure import (
+from samba.base.errors import InputError
+from samba.body.segments import segment_distances
+from samba.volume.articulated_figure import (
     ArticulatedFigure,
     creature_motion,
     long_chain,
     quadruped,
 )
-from samba.errors import InputError
-from samba.segments import segment_distances
-from samba.voxel_grid import VoxelGrid
+from samba.volume.voxel_grid import VoxelGrid
 
 QUADRUPED_BOX = np.array([[-0.9, -0.01, -1.1], [0.9, 1.3, 1.2]])
 """Capture volume (low, high corner) m the quadruped's motion must stay in."""

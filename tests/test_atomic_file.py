@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from samba.atomic_file import atomic_path, write_bytes_atomic, write_text_atomic
+from samba.base.atomic_file import atomic_path, write_bytes_atomic, write_text_atomic
 
 
 def test_written_files_get_the_mode_a_plain_file_would(tmp_path: Path) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from samba.synthetic import generate
+from samba.synthetic.motions import generate
 
 
 def _bench(name: str) -> ModuleType:

@@ -1,11 +1,12 @@
-"""Tests of the capsule body model `samba.body_model`."""
+"""Tests of the capsule body model `samba.body.body_model`."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from samba.body_model import (
+from samba.base.errors import InputError
+from samba.body.body_model import (
     CAPSULE_NAMES,
     KINDS,
     PART_NAMES,
@@ -14,9 +15,8 @@ from samba.body_model import (
     scaled_to,
     standing_heights,
 )
-from samba.errors import InputError
-from samba.skeleton import Body, standard_pose
-from samba.synthetic import generate
+from samba.body.skeleton import Body, standard_pose
+from samba.synthetic.motions import generate
 
 
 def _extent(starts: np.ndarray, ends: np.ndarray, radii: np.ndarray, axis: int) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""The BVH reader (`ingest.bvh`): grammar, kinematics, and errors that name file and line."""
+"""The BVH reader (`samba.ingest.bvh`): grammar, kinematics, and errors that name file and line."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bvh_fixtures import HumanoidFixture, make_humanoid
+from samba.ingest.bvh import BvhFile, parse_bvh, read_bvh
+from samba.ingest.bvh_take import load_bvh_take
+from samba.ingest.errors import BvhError
 
-from ingest.bvh import BvhFile, parse_bvh, read_bvh
-from ingest.bvh_take import load_bvh_take
-from ingest.errors import BvhError
-from samba.errors import InputError, SambaError
+from samba.base.errors import InputError, SambaError
 
 SOURCE = "walk.bvh"
 

@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 from board_render import board_poses, floor_pose, render_board, stage_cameras
 
-from samba.calibration import MIN_VIEWS, calibrate, calibrate_intrinsics
-from samba.calibration_board import Board, BoardView, parse_board
-from samba.calibration_file import read_calibration
-from samba.camera import Camera, CameraGroup
+from samba.base.errors import InputError
+from samba.cameras.calibration import MIN_VIEWS, calibrate, calibrate_intrinsics
+from samba.cameras.calibration_board import Board, BoardView, parse_board
+from samba.cameras.calibration_file import read_calibration
+from samba.cameras.camera import Camera, CameraGroup
 from samba.cli import main
-from samba.errors import InputError
 
 BOARD = "checkerboard:9x6:0.08"
 DISTORTIONS = ((-0.12, 0.03, 0.0, 0.0, 0.0), (0.0,) * 5, (-0.05, 0.01, 5e-4, -5e-4, 0.0))

@@ -1,4 +1,5 @@
-"""Tests of the anipose / FreeMoCap / Pose2Sim calibration files `samba.calibration_file`."""
+"""Tests of the anipose / FreeMoCap / Pose2Sim calibration files
+(`samba.cameras.calibration_file`)."""
 
 from __future__ import annotations
 
@@ -9,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from samba.calibration_file import read_calibration, write_calibration
-from samba.camera import Camera, CameraGroup
-from samba.errors import InputError
+from samba.base.errors import InputError
+from samba.cameras.calibration_file import read_calibration, write_calibration
+from samba.cameras.camera import Camera, CameraGroup
 
 # As aniposelib's CameraGroup.dump writes it (its test data, values shortened), in mm.
 ANIPOSE_FILE = """\

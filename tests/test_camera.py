@@ -1,4 +1,4 @@
-"""Tests of the pinhole camera model `samba.camera`."""
+"""Tests of the pinhole camera model `samba.cameras.camera`."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from samba.camera import Camera, CameraGroup
+from samba.cameras.camera import Camera, CameraGroup
 
 SIZE = (160, 120)
 CENTRE = ((SIZE[0] - 1) / 2, (SIZE[1] - 1) / 2)

@@ -1,4 +1,5 @@
-"""End to end: synthetic videos -> detection -> tracking -> triangulation (`samba.camera_chain`)."""
+"""End to end: synthetic videos -> detection -> tracking -> triangulation
+(`samba.markers.camera_chain`)."""
 
 from __future__ import annotations
 
@@ -6,14 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 
-from ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba.camera_chain import ChainResult, run_chain
-from samba.lead_in import standing_lead_in
-from samba.observation import evaluation_cameras, marker_coverage, spread_cameras
-from samba.skeleton import markers_of
-from samba.synthetic import generate
-from samba.synthetic_cameras import with_size
+from samba.body.skeleton import markers_of
+from samba.cameras.synthetic_cameras import with_size
+from samba.markers.camera_chain import ChainResult, run_chain
+from samba.markers.lead_in import standing_lead_in
+from samba.markers.observation import evaluation_cameras, marker_coverage, spread_cameras
+from samba.synthetic.motions import generate
 
 RMS_LIMIT_M = 0.015
 """The issue's acceptance: 3D markers within 1.5 cm RMS where both cameras see them."""

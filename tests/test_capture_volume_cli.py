@@ -1,6 +1,6 @@
 """`samba capture-volume` end to end, in-process, on local files: four 320x240 cameras
 around a synthetic stage filming a second of jumping jacks (the men's-M capsule body in
-colour, `samba.person_render`) and, as a subject that is no human, a standing pole."""
+colour, `samba.silhouette.person_render`) and, as a subject that is no human, a standing pole."""
 
 from __future__ import annotations
 
@@ -12,16 +12,16 @@ import cv2
 import numpy as np
 import pytest
 from markerless_fixtures import SENSOR_NOISE, write_image_folder
+from samba.ingest.bvh import read_bvh
 from test_track_video import _assert_one_line_error, samba
 
-from ingest.bvh import read_bvh
-from samba.body_model import BodyModel, scaled_to
-from samba.calibration_file import write_calibration
-from samba.camera import Camera
-from samba.person_render import person_frames, stage_background
-from samba.synthetic import generate
-from samba.visual_hull import volume_cameras
-from samba.voxel_grid import VoxelGrid
+from samba.body.body_model import BodyModel, scaled_to
+from samba.cameras.calibration_file import write_calibration
+from samba.cameras.camera import Camera
+from samba.silhouette.person_render import person_frames, stage_background
+from samba.synthetic.motions import generate
+from samba.volume.visual_hull import volume_cameras
+from samba.volume.voxel_grid import VoxelGrid
 
 FPS = 15.0
 VOXEL = 0.04
@@ -255,7 +255,7 @@ def test_a_failure_writing_the_joints_leaves_no_bvh(
     def full_disk(path: Path) -> None:
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
-    monkeypatch.setattr("service.capture_volume_cli.atomic_path", full_disk)
+    monkeypatch.setattr("samba.service.capture_volume_cli.atomic_path", full_disk)
     out, joints = tmp_path / "take.bvh", tmp_path / "take.npz"
     facing = [f"{value:.6f}" for value in stage.facing]
     flags = ("--empty-frames", EMPTY_FRAMES, "--joints", joints, "--facing", *facing)

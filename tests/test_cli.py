@@ -10,11 +10,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from samba.db.store import PoseStore
+from samba.export.gltf_reader import read_glb_joint_positions
+from samba.export.usd_reader import read_usd_joint_positions
+from samba.ingest.mcap_take import read_take
 
-from db.store import PoseStore
-from export.gltf_reader import read_glb_joint_positions
-from export.usd_reader import read_usd_joint_positions
-from ingest.mcap_take import read_take
 from samba.cli import main
 
 

@@ -1,4 +1,4 @@
-"""Lost marker labels found again across cameras (`samba.cross_view_labels`)."""
+"""Lost marker labels found again across cameras (`samba.markers.cross_view_labels`)."""
 
 from __future__ import annotations
 
@@ -7,17 +7,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 
-from ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba.camera import Camera, CameraGroup
-from samba.camera_chain import ChainSettings, run_chain
-from samba.cross_view_labels import FRESH_FRAMES, CrossViewLabeller, Reacquisition
-from samba.errors import InputError
-from samba.marker_tracking import TrackerSettings
-from samba.observation import spread_cameras
-from samba.skeleton import markers_of, standing_pose
-from samba.synthetic import generate
-from samba.synthetic_cameras import with_size
+from samba.base.errors import InputError
+from samba.body.skeleton import markers_of, standing_pose
+from samba.cameras.camera import Camera, CameraGroup
+from samba.cameras.synthetic_cameras import with_size
+from samba.markers.camera_chain import ChainSettings, run_chain
+from samba.markers.cross_view_labels import FRESH_FRAMES, CrossViewLabeller, Reacquisition
+from samba.markers.observation import spread_cameras
+from samba.markers.tracking import TrackerSettings
+from samba.synthetic.motions import generate
 
 L_WRIST, R_WRIST, L_KNEE, L_FOOT = 2, 3, 4, 6
 

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from samba.base.errors import InputError
 from samba.cli import main
-from samba.errors import InputError
-from samba.eval_cli import evaluate, sweep_points
-from samba.methods import METHODS, method
-from samba.synthetic import generate
+from samba.evaluation.experiment import evaluate, sweep_points
+from samba.reconstruct.methods import METHODS, method
+from samba.synthetic.motions import generate
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 PICKED = ("cgspeed_131_01.bvh", "iclone_002_01.bvh", "daz_salsa_10.bvh")

@@ -1,4 +1,4 @@
-"""Grouping camera packets into capture frames: `service.frame_sync.FrameSync`.
+"""Grouping camera packets into capture frames: `samba.service.frame_sync.FrameSync`.
 
 Arrival times are passed explicitly (server seconds); nothing sleeps. Helpers build the
 deliveries of cameras at 60 fps, send them in arrival order like the server would (expire
@@ -13,9 +13,8 @@ from itertools import pairwise
 
 import numpy as np
 import pytest
-
-from service.frame_sync import RECENT_PACKETS, FrameSync, SyncedFrame
-from service.packet import MarkerPacket
+from samba.service.frame_sync import RECENT_PACKETS, FrameSync, SyncedFrame
+from samba.service.packet import MarkerPacket
 
 FPS = 60.0
 PERIOD = 1.0 / FPS

@@ -21,16 +21,16 @@ import pygltflib as gltf
 import pytest
 from export_fixtures import box_mesh, real_takes, synthetic_motion
 from glb_edit import with_json
+from samba.export.avatar_mesh import AvatarMesh
+from samba.export.errors import ExportError
+from samba.export.gltf_reader import read_glb_joint_positions
+from samba.export.gltf_writer import write_glb
+from samba.export.humanoid import N_BONES, HumanoidRig
+from samba.export.motion import HumanoidMotion
+from samba.export.retarget import bone_direction_errors, retarget
 
-from export.avatar_mesh import AvatarMesh
-from export.errors import ExportError
-from export.gltf_reader import read_glb_joint_positions
-from export.gltf_writer import write_glb
-from export.humanoid import N_BONES, HumanoidRig
-from export.motion import HumanoidMotion
-from export.retarget import bone_direction_errors, retarget
-from samba import synthetic
-from samba.take import Take
+from samba.body.take import Take
+from samba.synthetic import motions as synthetic
 
 VALIDATOR = "gltf-validator@2.0.0-dev.3.10"
 RUNNER = Path(__file__).with_name("gltf_validate.js")
@@ -118,9 +118,9 @@ def test_skeleton_only_export_validates(tmp_path: Path, validate: Validate) -> N
 
 
 def test_mannequin_export_validates(tmp_path: Path, validate: Validate) -> None:
-    if importlib.util.find_spec("export.mannequin") is None:
-        pytest.skip("export.mannequin is not there yet")
-    mannequin = importlib.import_module("export.mannequin").mannequin
+    if importlib.util.find_spec("samba.export.mannequin") is None:
+        pytest.skip("samba.export.mannequin is not there yet")
+    mannequin = importlib.import_module("samba.export.mannequin").mannequin
     _, motion = synthetic_motion("wave")
     path = tmp_path / "wave.glb"
     write_glb(path, motion, mannequin(motion.rig))

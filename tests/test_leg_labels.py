@@ -1,5 +1,5 @@
-"""Knees and feet lost in every camera found again by the legs' shape (`samba.leg_labels`
-through `samba.cross_view_labels.CrossViewLabeller`)."""
+"""Knees and feet lost in every camera found again by the legs' shape (`samba.markers.leg_labels`
+through `samba.markers.cross_view_labels.CrossViewLabeller`)."""
 
 from __future__ import annotations
 
@@ -7,15 +7,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 
-from ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba.camera import CameraGroup
-from samba.camera_chain import ChainSettings, run_chain
-from samba.cross_view_labels import FRESH_FRAMES, CrossViewLabeller, CrossViewSettings
-from samba.leg_labels import KNOWN, LegBody, ShinMeter, assign_legs
-from samba.observation import evaluation_cameras, spread_cameras
-from samba.skeleton import markers_of, standing_pose
-from samba.synthetic_cameras import with_size
+from samba.body.skeleton import markers_of, standing_pose
+from samba.cameras.camera import CameraGroup
+from samba.cameras.synthetic_cameras import with_size
+from samba.markers.camera_chain import ChainSettings, run_chain
+from samba.markers.cross_view_labels import FRESH_FRAMES, CrossViewLabeller, CrossViewSettings
+from samba.markers.leg_labels import KNOWN, LegBody, ShinMeter, assign_legs
+from samba.markers.observation import evaluation_cameras, spread_cameras
 
 LEGS = [4, 5, 6, 7]  # left knee, right knee, left foot, right foot
 

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from samba.export.humanoid import HumanoidRig
+from samba.export.live_retarget import LiveRetarget, retarget_together
+from samba.export.retarget import leg_length, local_rotations, rest_frames, retarget
 from scipy.spatial.transform import Rotation
 
-from export.humanoid import HumanoidRig
-from export.live_retarget import LiveRetarget, retarget_together
-from export.retarget import leg_length, local_rotations, rest_frames, retarget
-from samba.skeleton import Body
-from samba.synthetic import generate
+from samba.body.skeleton import Body
+from samba.synthetic.motions import generate
 
 T_POSE = HumanoidRig.from_body()
 A_POSE_SMALL = HumanoidRig.from_body(

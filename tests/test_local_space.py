@@ -1,4 +1,4 @@
-"""The local pose space and its energy (`samba.local_space`).
+"""The local pose space and its energy (`samba.reconstruct.local_space`).
 
 The exact fast solver and the paper's Levenberg-Marquardt from its initial value must
 find the same pose (within 1e-6 m) with all markers or some missing, with or without
@@ -11,20 +11,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from samba.db.index import PoseIndex
 
-from db.index import PoseIndex
-from samba.local_space import (
+from samba.body.skeleton import markers_of
+from samba.reconstruct.local_space import (
     EnergyTerms,
     LocalPoseSpace,
     initial_weights,
     solve,
     solve_lm,
 )
-from samba.methods import method
-from samba.pseudo_poses import AngleNoise, pseudo_poses
-from samba.reconstruction import Reconstructor
-from samba.skeleton import markers_of
-from samba.synthetic import generate, library
+from samba.reconstruct.methods import method
+from samba.reconstruct.pseudo_poses import AngleNoise, pseudo_poses
+from samba.reconstruct.reconstruction import Reconstructor
+from samba.synthetic.motions import generate, library
 
 K, N = 10, 10
 ALPHA = 1.0 / 0.01**2

@@ -1,4 +1,4 @@
-"""Tests of marker detection `samba.marker_detection`: accuracy on rendered discs, inputs."""
+"""Tests of marker detection `samba.markers.detection`: accuracy on rendered discs, inputs."""
 
 from __future__ import annotations
 
@@ -6,12 +6,12 @@ import cv2
 import numpy as np
 import pytest
 
-from samba.errors import InputError
-from samba.marker_detection import auto_threshold, detect_markers, static_mask
-from samba.marker_render import RenderOptions, film_empty_stage, render
-from samba.observation import evaluation_cameras
-from samba.synthetic import generate
-from samba.synthetic_cameras import with_size
+from samba.base.errors import InputError
+from samba.cameras.synthetic_cameras import with_size
+from samba.markers.detection import auto_threshold, detect_markers, static_mask
+from samba.markers.observation import evaluation_cameras
+from samba.markers.render import RenderOptions, film_empty_stage, render
+from samba.synthetic.motions import generate
 
 RESOLUTIONS = [(160, 120), (320, 240), (640, 480), (1280, 720), (1920, 1080)]
 

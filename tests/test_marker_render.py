@@ -1,4 +1,5 @@
-"""Tests of the synthetic camera rig `samba.marker_render` and frame files `samba.frame_io`."""
+"""Tests of the synthetic camera rig `samba.markers.render` and frame files
+`samba.cameras.frame_io`."""
 
 from __future__ import annotations
 
@@ -7,11 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from samba.camera import Camera
-from samba.errors import InputError
-from samba.frame_io import read_frames, write_images, write_video
-from samba.marker_detection import detect_markers
-from samba.marker_render import (
+from samba.base.errors import InputError
+from samba.body.segments import segment_distances
+from samba.body.skeleton import markers_of, standard_pose
+from samba.cameras.camera import Camera
+from samba.cameras.frame_io import read_frames, write_images, write_video
+from samba.markers.detection import detect_markers
+from samba.markers.observation import evaluation_cameras
+from samba.markers.render import (
     BodyCapsules,
     RenderOptions,
     film_empty_stage,
@@ -19,10 +23,7 @@ from samba.marker_render import (
     marker_views,
     render,
 )
-from samba.observation import evaluation_cameras
-from samba.segments import segment_distances
-from samba.skeleton import markers_of, standard_pose
-from samba.synthetic import generate
+from samba.synthetic.motions import generate
 
 FRONT = Camera.look_at("front", (0.0, 1.2, 4.0), (0.0, 0.9, 0.0), (160, 120), 60.0)
 BACK = Camera.look_at("back", (0.0, 1.2, -4.0), (0.0, 0.9, 0.0), (160, 120), 60.0)

@@ -1,20 +1,20 @@
-"""Tests of the 8-label tracker `samba.marker_tracking`: crossing, merging, occlusion."""
+"""Tests of the 8-label tracker `samba.markers.tracking`: crossing, merging, occlusion."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from samba.camera import Camera
-from samba.errors import InputError
-from samba.marker_tracking import (
+from samba.base.errors import InputError
+from samba.body.skeleton import markers_of, standard_pose
+from samba.cameras.camera import Camera
+from samba.markers.tracking import (
     REFERENCE_DISTANCE_M,
     REFERENCE_FOCAL_PX,
     MarkerTracker,
     TrackerSettings,
     pixel_scale,
 )
-from samba.skeleton import markers_of, standard_pose
 
 # a subject facing a 160x120 camera: shoulders, wrists, knees, feet (pixels)
 BASE = np.array(

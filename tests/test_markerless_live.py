@@ -21,20 +21,20 @@ from markerless_fixtures import (
     mpjpe_cm,
     write_camera_calibration,
 )
+from samba.db.shape_tree_file import read_shape_tree, tree_path, write_shape_tree
+from samba.db.store import PoseStore
+from samba.db.synthetic_store import build_synthetic_store
+from samba.ingest.mcap_take import read_take
+from samba.service.node import Capture, PacketSender, run_node
+from samba.service.packet import MarkerPacket, PosePacket, decode, encode
+from samba.service.serve import LiveServer
+from samba.service.session_config import SessionConfig
+from samba.service.silhouette_node import SilhouetteNode
 
-from db.shape_tree_file import read_shape_tree, tree_path, write_shape_tree
-from db.store import PoseStore
-from db.synthetic_store import build_synthetic_store
-from ingest.mcap_take import read_take
 from samba.cli import main
-from samba.shape_tree import ShapeTree
-from samba.silhouette_extraction import SilhouetteExtractor
-from samba.silhouette_view import SilhouetteView
-from service.node import Capture, PacketSender, run_node
-from service.packet import MarkerPacket, PosePacket, decode, encode
-from service.serve import LiveServer
-from service.session_config import SessionConfig
-from service.silhouette_node import SilhouetteNode
+from samba.silhouette.extraction import SilhouetteExtractor
+from samba.silhouette.shape_tree import ShapeTree
+from samba.silhouette.view import SilhouetteView
 
 SESSION = "mk"
 

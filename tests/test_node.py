@@ -13,17 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-import service.node
-from samba.calibration_file import write_calibration
-from samba.camera import Camera, CameraGroup
-from samba.cli import main
-from samba.frame_io import write_images, write_video
-from samba.lead_in import LeadIn
-from samba.observation import spread_cameras
-from samba.skeleton import markers_of
-from service.errors import PacketError
-from service.node import (
+import samba.service.node
+from samba.service.errors import PacketError
+from samba.service.node import (
     CameraNode,
     Capture,
     PacketSender,
@@ -32,7 +24,15 @@ from service.node import (
     run_node,
     synthetic_lead_in,
 )
-from service.packet import MarkerPacket, decode
+from samba.service.packet import MarkerPacket, decode
+
+from samba.body.skeleton import markers_of
+from samba.cameras.calibration_file import write_calibration
+from samba.cameras.camera import Camera, CameraGroup
+from samba.cameras.frame_io import write_images, write_video
+from samba.cli import main
+from samba.markers.lead_in import LeadIn
+from samba.markers.observation import spread_cameras
 
 MOTION, SECONDS, FPS, SEED = "walk", 1.0, 30.0, 3
 FRAMES = round((1.0 + SECONDS) * FPS)
@@ -311,7 +311,7 @@ def test_a_server_that_is_not_listening_only_counts_errors(
 def test_ctrl_c_ends_with_the_summary(
     rig: Rig, receiver: Receiver, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(service.node, "STATUS_SECONDS", 0.0)
+    monkeypatch.setattr(samba.service.node, "STATUS_SECONDS", 0.0)
     feed = SyntheticFeed(rig.cameras[1], 1, rig.lead_in, FPS, SEED, START_AT, pace=False)
 
     def interrupted_after_five() -> Iterator[Capture]:

@@ -1,4 +1,4 @@
-"""Tests of the synthetic observation model `samba.observation` (EVALUATION.md)."""
+"""Tests of the synthetic observation model `samba.markers.observation` (EVALUATION.md)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,9 @@ from functools import cache
 import numpy as np
 import pytest
 
-from samba.camera import Camera
-from samba.observation import (
+from samba.body.skeleton import BONES, bone_lengths, markers_of, standard_pose
+from samba.cameras.camera import Camera
+from samba.markers.observation import (
     ObservedMarkers,
     evaluation_cameras,
     facing_directions,
@@ -18,8 +19,7 @@ from samba.observation import (
     observe_markers,
     scale_limbs,
 )
-from samba.skeleton import BONES, bone_lengths, markers_of, standard_pose
-from samba.synthetic import generate
+from samba.synthetic.motions import generate
 
 TORSO_JOINTS = (0, 1, 2, 7, 8)  # head, shoulders, hips
 

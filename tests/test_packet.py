@@ -1,7 +1,7 @@
 """The camera-node → server wire format: layout, round trips, signing and fuzzed datagrams.
 
 The documented layout is checked twice: against the bytes `encode` writes and against
-the table in `service.packet`'s docstring, which the README copies.
+the table in `samba.service.packet`'s docstring, which the README copies.
 """
 
 from __future__ import annotations
@@ -13,13 +13,11 @@ import struct
 
 import numpy as np
 import pytest
+import samba.service.packet
 from hypothesis import given
 from hypothesis import strategies as st
-
-import service.packet
-from samba.errors import InputError
-from service.errors import PacketError
-from service.packet import (
+from samba.service.errors import PacketError
+from samba.service.packet import (
     BODY_BYTES,
     FLAG_BLOBS,
     FLAG_POSE,
@@ -34,6 +32,8 @@ from service.packet import (
     encode,
     sequence_delta,
 )
+
+from samba.base.errors import InputError
 
 KEY = b"k" * 32
 OTHER_KEY = b"o" * 32
@@ -102,7 +102,7 @@ def test_layout_sizes_and_offsets() -> None:
 
 def test_docstring_table_matches_layout() -> None:
     rows = re.findall(
-        r"^\| ([\d +b]+) \| (\d+n?) \| ([\w\[\]]+) \| (\w+) \|", service.packet.__doc__, re.M
+        r"^\| ([\d +b]+) \| (\d+n?) \| ([\w\[\]]+) \| (\w+) \|", samba.service.packet.__doc__, re.M
     )
     always = tuple((int(o), int(s), t, f) for o, s, t, f in rows[: len(LAYOUT)])
     assert always == LAYOUT

@@ -12,16 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 from live_fixtures import config
+from samba.db.store import PoseStore
+from samba.db.synthetic_store import build_synthetic_store
+from samba.service.errors import ServiceError
+from samba.service.frame_pipeline import CameraMarkers
+from samba.service.pipeline_workers import FrameDone, InlinePipelines, WorkerPipelines
+from samba.service.session_indexes import SessionIndexes
+from samba.service.synthetic_capture import SyntheticCapture
 
-from db.store import PoseStore
-from db.synthetic_store import build_synthetic_store
-from samba.errors import InputError
-from samba.synthetic import generate
-from service.errors import ServiceError
-from service.frame_pipeline import CameraMarkers
-from service.pipeline_workers import FrameDone, InlinePipelines, WorkerPipelines
-from service.session_indexes import SessionIndexes
-from service.synthetic_capture import SyntheticCapture
+from samba.base.errors import InputError
+from samba.synthetic.motions import generate
 
 
 class Collected:

@@ -1,4 +1,4 @@
-"""Tests of the pose thinning of the silhouette tree, `samba.pose_selection`.
+"""Tests of the pose thinning of the silhouette tree, `samba.silhouette.pose_selection`.
 
 The greedy must equal a brute force written from its definition, keep a set that covers
 every dropped pose and holds no two poses alike, thin slow motion hard and leave very
@@ -12,10 +12,10 @@ from functools import cache
 import numpy as np
 import pytest
 
-from samba.errors import InputError
-from samba.pose_selection import DIRECTION_NAMES, bone_directions, distinct_poses, turned
-from samba.skeleton import bone_lengths, standard_pose
-from samba.synthetic import MOTIONS, generate
+from samba.base.errors import InputError
+from samba.body.skeleton import bone_lengths, standard_pose
+from samba.silhouette.pose_selection import DIRECTION_NAMES, bone_directions, distinct_poses, turned
+from samba.synthetic.motions import MOTIONS, generate
 
 
 def _max_angles(directions: np.ndarray, others: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Pseudo-poses (`samba.pseudo_poses`): joint-angle noise that keeps the skeleton rigid.
+"""Pseudo-poses (`samba.reconstruct.pseudo_poses`): joint-angle noise that keeps the skeleton rigid.
 
 Every pseudo-pose must keep the neighbour's bone lengths and neck length, include the
 neighbour itself, bend each elbow and knee by exactly the drawn angle, swing each upper
@@ -14,9 +14,9 @@ from functools import cache
 import numpy as np
 import pytest
 
-from samba.pseudo_poses import AngleNoise, pseudo_poses
-from samba.skeleton import bone_lengths, standard_pose
-from samba.synthetic import generate
+from samba.body.skeleton import bone_lengths, standard_pose
+from samba.reconstruct.pseudo_poses import AngleNoise, pseudo_poses
+from samba.synthetic.motions import generate
 
 N = 12
 SIGMA_DEG = 8.0

@@ -1,20 +1,20 @@
-"""13 joints from 8 markers (`samba.reconstruction`, `samba.methods`) on a small synthetic
-database: database poses come back, missing or infinite markers never give NaN poses,
-the live and batch paths agree, and `best` beats `samba` beats `nn`."""
+"""13 joints from 8 markers (`samba.reconstruct.reconstruction`, `samba.reconstruct.methods`)
+on a small synthetic database: database poses come back, missing or infinite markers never
+give NaN poses, the live and batch paths agree, and `best` beats `samba` beats `nn`."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+import samba.db.index
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from samba.db.index import PoseIndex
 
-import db.index
-from db.index import PoseIndex
-from samba.methods import method
-from samba.reconstruction import Reconstruction, Reconstructor, reconstruct_together
-from samba.skeleton import markers_of, mirror_poses, standard_pose
-from samba.synthetic import MOTIONS, generate, library
+from samba.body.skeleton import markers_of, mirror_poses, standard_pose
+from samba.reconstruct.methods import method
+from samba.reconstruct.reconstruction import Reconstruction, Reconstructor, reconstruct_together
+from samba.synthetic.motions import MOTIONS, generate, library
 
 METHOD_NAMES = ("nn", "samba", "best")
 PAIRS = ((0, 1), (2, 3), (4, 5), (6, 7))
@@ -221,13 +221,13 @@ def test_prepared_index_builds_nothing_when_markers_are_lost(
     r = chosen.build(PoseIndex.build(poses))
     assert r.prepare(2) == 36
     built: list[np.ndarray] = []
-    real = db.index.marker_features
+    real = samba.db.index.marker_features
 
     def counted(poses: np.ndarray, keep: np.ndarray, *args: object) -> np.ndarray:
         built.append(keep)
         return real(poses, keep, *args)
 
-    monkeypatch.setattr(db.index, "marker_features", counted)
+    monkeypatch.setattr(samba.db.index, "marker_features", counted)
     _, markers = _observe("walk", seed=502)
     lost = np.random.default_rng(1).random(markers.shape[:2]) < 0.1
     lost[np.cumsum(lost, axis=1) > 2] = False  # at most two markers lost per frame

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from samba.export.humanoid import BONE_INDEX, BONE_NAMES, PARENTS, HumanoidRig
+from samba.export.motion import HumanoidMotion
+from samba.export.retarget import MEASURED_BONES, bone_direction_errors, leg_length, retarget
 
-from export.humanoid import BONE_INDEX, BONE_NAMES, PARENTS, HumanoidRig
-from export.motion import HumanoidMotion
-from export.retarget import MEASURED_BONES, bone_direction_errors, leg_length, retarget
-from samba.skeleton import Body
-from samba.synthetic import generate
+from samba.body.skeleton import Body
+from samba.synthetic.motions import generate
 
 T_POSE = HumanoidRig.from_body()
 A_POSE_SMALL = HumanoidRig.from_body(

@@ -1,4 +1,4 @@
-"""Rig maps (`ingest.rigs`): detection of the built-in rigs, prefixes, user TOML maps."""
+"""Rig maps (`samba.ingest.rigs`): detection of the built-in rigs, prefixes, user TOML maps."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bvh_fixtures import MAPPED_KEYS, RIG_NAMES, make_humanoid, rig_names
+from samba.ingest.bvh import parse_bvh
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.ingest.errors import RigError
+from samba.ingest.rigs import BUILTIN_RIGS, RigMap, detect_rig, map_rig, rig_by_name
 
-from ingest.bvh import parse_bvh
-from ingest.bvh_take import BvhImportOptions, load_bvh_take
-from ingest.errors import RigError
-from ingest.rigs import BUILTIN_RIGS, RigMap, detect_rig, map_rig, rig_by_name
-from samba.skeleton import JOINT_NAMES
+from samba.body.skeleton import JOINT_NAMES
 
 CUSTOM = {
     "hips": "Bone_Pelvis",

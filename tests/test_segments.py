@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from samba.segments import point_segment_distances, segment_distances
+from samba.body.segments import point_segment_distances, segment_distances
 
 
 def test_point_segment_distances_equal_those_of_a_point_and_a_segment() -> None:

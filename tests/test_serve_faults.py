@@ -17,13 +17,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from live_fixtures import ServeProcess, VmcReceiver, config, serve_process
 from mcap.reader import make_reader
+from samba.ingest.mcap_take import read_take
+from samba.service.packet import decode, encode
+from samba.service.server import CaptureServer
+from samba.service.synthetic_capture import SyntheticCapture, play
 from udp_fault_proxy import UdpFaultProxy
 
-from ingest.mcap_take import read_take
-from samba.calibration_file import write_calibration
-from service.packet import decode, encode
-from service.server import CaptureServer
-from service.synthetic_capture import SyntheticCapture, play
+from samba.cameras.calibration_file import write_calibration
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -89,7 +89,7 @@ def test_loss_duplication_reordering_and_jitter(
     both = n - len(lost)  # frames whose two packets both got through
     assert sync["partial"] == 0 and sync["skipped"] > 0, sync
     # a capture frame resolves once, but for the first half second, while the clock
-    # offsets settle, a jittered packet may go to a frame of its own (`service.frame_sync`;
+    # offsets settle, a jittered packet may go to a frame of its own (`samba.service.frame_sync`;
     # on a busy machine 4 of 300 frames did)
     assert sync["complete"] + sync["skipped"] <= n + round(0.5 * long_capture.take.fps), sync
     # all of them unless the busy machine delayed a packet past wait_ms on top of the jitter

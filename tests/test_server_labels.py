@@ -14,20 +14,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 from live_fixtures import config
+from samba.service.frame_pipeline import CameraMarkers, FramePipeline
+from samba.service.node import CameraNode, SubjectStart, SyntheticFeed
+from samba.service.packet import MarkerPacket
+from samba.service.pipeline_workers import FrameDone, InlinePipelines
+from samba.service.session import CaptureSession
 
-from samba.calibration_file import write_calibration
-from samba.camera import CameraGroup
-from samba.lead_in import standing_lead_in
-from samba.observation import spread_cameras
-from samba.skeleton import N_MARKERS, markers_of
-from samba.stage_tracking import StageTracker
-from samba.synthetic import generate
-from samba.synthetic_cameras import with_size
-from service.frame_pipeline import CameraMarkers, FramePipeline
-from service.node import CameraNode, SubjectStart, SyntheticFeed
-from service.packet import MarkerPacket
-from service.pipeline_workers import FrameDone, InlinePipelines
-from service.session import CaptureSession
+from samba.body.skeleton import N_MARKERS, markers_of
+from samba.cameras.calibration_file import write_calibration
+from samba.cameras.camera import CameraGroup
+from samba.cameras.synthetic_cameras import with_size
+from samba.markers.lead_in import standing_lead_in
+from samba.markers.observation import spread_cameras
+from samba.markers.stage_tracking import StageTracker
+from samba.synthetic.motions import generate
 
 FPS = 30.0
 

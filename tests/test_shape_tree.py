@@ -1,4 +1,4 @@
-"""Tests of `samba.shape_tree`: the shape hierarchy of single-camera silhouette tracking,
+"""Tests of `samba.silhouette.shape_tree`: the shape hierarchy of single-camera silhouette tracking,
 on the small tree of `silhouette_fixtures`."""
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ from silhouette_fixtures import (
     view,
 )
 
-from samba.body_model import PART_NAMES, standing_heights
-from samba.errors import InputError
-from samba.pose_selection import distinct_poses
-from samba.shape_tree import DEFAULT_RADII, LEVEL_SIZES, ShapeTree
-from samba.silhouette_distance import downsampled
+from samba.base.errors import InputError
+from samba.body.body_model import PART_NAMES, standing_heights
+from samba.silhouette.distance import downsampled
+from samba.silhouette.pose_selection import distinct_poses
+from samba.silhouette.shape_tree import DEFAULT_RADII, LEVEL_SIZES, ShapeTree
 
 
 def _descendants(tree: ShapeTree, level: int, node: int) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Tests of `db.shape_tree_file`: shape trees saved with the pose database, on the small
+"""Tests of `samba.db.shape_tree_file`: shape trees saved with the pose database, on the small
 tree of `silhouette_fixtures`."""
 
 from __future__ import annotations
@@ -10,18 +10,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from samba.db.errors import StoreError
+from samba.db.shape_tree_file import FORMAT, read_shape_tree, tree_path, write_shape_tree
 from silhouette_fixtures import BODY, CAMERA, build_small_tree
 
-from db.errors import StoreError
-from db.shape_tree_file import FORMAT, read_shape_tree, tree_path, write_shape_tree
-from samba.body_model import BodyModel
-from samba.shape_tree import ShapeTree
-from samba.silhouette_distance import SilhouetteWeights, downsampled
-from samba.silhouette_evaluation import observed_silhouettes, staged
-from samba.silhouette_runs import RowSums
-from samba.silhouette_tracker import SilhouetteTracker, TrackerSettings
-from samba.silhouette_view import SilhouetteView
-from samba.synthetic import generate
+from samba.body.body_model import BodyModel
+from samba.silhouette.distance import SilhouetteWeights, downsampled
+from samba.silhouette.evaluation import observed_silhouettes, staged
+from samba.silhouette.runs import RowSums
+from samba.silhouette.shape_tree import ShapeTree
+from samba.silhouette.tracker import SilhouetteTracker, TrackerSettings
+from samba.silhouette.view import SilhouetteView
+from samba.synthetic.motions import generate
 
 
 @pytest.fixture(scope="module")

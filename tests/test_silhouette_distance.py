@@ -1,4 +1,4 @@
-"""Tests of the silhouette distances `samba.silhouette_distance` (Okada et al., Sec. 2.2)."""
+"""Tests of the silhouette distances `samba.silhouette.distance` (Okada et al., Sec. 2.2)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy import ndimage, sparse
 
-from samba.errors import InputError
-from samba.silhouette_distance import (
+from samba.base.errors import InputError
+from samba.silhouette.distance import (
     CORE_ALPHA,
     DISTANCES,
     SilhouetteWeights,

@@ -7,19 +7,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from samba.body_model import BodyModel
-from samba.camera import Camera
-from samba.shape_tree import ShapeTree
-from samba.silhouette_evaluation import (
+from samba.body.body_model import BodyModel
+from samba.body.skeleton import mirror_poses
+from samba.cameras.camera import Camera
+from samba.silhouette.evaluation import (
     arm_swing_experiment,
     observed_silhouettes,
     staged,
     track_take,
 )
-from samba.silhouette_tracker import SilhouetteTracker, TrackerSettings
-from samba.silhouette_view import SilhouetteView
-from samba.skeleton import mirror_poses
-from samba.synthetic import generate, library
+from samba.silhouette.shape_tree import ShapeTree
+from samba.silhouette.tracker import SilhouetteTracker, TrackerSettings
+from samba.silhouette.view import SilhouetteView
+from samba.synthetic.motions import generate, library
 
 CAMERA = Camera.look_at("front", (0.0, 1.2, 3.6), (0.0, 0.9, 0.0), (320, 240), 55.0)
 BODY = BodyModel.for_subject(1.75)

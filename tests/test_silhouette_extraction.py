@@ -1,4 +1,4 @@
-"""Tests of silhouette extraction from video `samba.silhouette_extraction`, on synthetic
+"""Tests of silhouette extraction from video `samba.silhouette.extraction`, on synthetic
 frames: a textured noisy wall, a person in several colours (trousers close to the wall's
 colour), a global brightness change and a cast shadow."""
 
@@ -8,11 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from samba.body_model import BodyModel
-from samba.camera import Camera
-from samba.errors import InputError
-from samba.silhouette_evaluation import staged
-from samba.silhouette_extraction import (
+from samba.base.errors import InputError
+from samba.body.body_model import BodyModel
+from samba.cameras.camera import Camera
+from samba.silhouette.evaluation import staged
+from samba.silhouette.extraction import (
     BACKGROUND_METHODS,
     MIN_BACKGROUND_FRAMES,
     ColourBackground,
@@ -22,9 +22,9 @@ from samba.silhouette_extraction import (
     learn_background,
     tracking_close_px,
 )
-from samba.silhouette_render import render_silhouettes
-from samba.silhouette_view import SilhouetteView
-from samba.synthetic import generate
+from samba.silhouette.render import render_silhouettes
+from samba.silhouette.view import SilhouetteView
+from samba.synthetic.motions import generate
 
 HEIGHT, WIDTH = 240, 320
 WALL = np.array([105, 118, 128], np.float32)

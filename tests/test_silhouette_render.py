@@ -1,30 +1,30 @@
-"""Tests of the silhouette renderer `samba.silhouette_render`."""
+"""Tests of the silhouette renderer `samba.silhouette.render`."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from samba.body_model import (
+from samba.base.errors import InputError
+from samba.body.body_model import (
     ANKLE_HEIGHT_FRACTION,
     CAPSULE_NAMES,
     PART_NAMES,
     BodyModel,
     scaled_to,
 )
-from samba.camera import Camera
-from samba.errors import InputError
-from samba.segments import segment_distances
-from samba.silhouette_render import (
+from samba.body.segments import segment_distances
+from samba.body.skeleton import standard_pose
+from samba.cameras.camera import Camera
+from samba.cameras.synthetic_cameras import with_size
+from samba.silhouette.render import (
     BACKGROUND_LABEL,
     noisy_silhouettes,
     part_visibility,
     render_part_labels,
     render_silhouettes,
 )
-from samba.skeleton import standard_pose
-from samba.synthetic import MOTIONS, generate
-from samba.synthetic_cameras import with_size
+from samba.synthetic.motions import MOTIONS, generate
 
 MEN_M = BodyModel.named("men-M")
 FRONT = Camera.look_at("front", (0.0, 0.85, 3.0), (0.0, 0.85, 0.0), (320, 240), 60.0)

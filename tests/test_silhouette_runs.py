@@ -1,4 +1,4 @@
-"""Tests of `samba.silhouette_runs`: silhouettes stored as runs, compared in O(runs)."""
+"""Tests of `samba.silhouette.runs`: silhouettes stored as runs, compared in O(runs)."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from samba.errors import InputError
-from samba.silhouette_distance import DISTANCES, SilhouetteWeights
-from samba.silhouette_runs import RowSums, SilhouetteRuns
+from samba.base.errors import InputError
+from samba.silhouette.distance import DISTANCES, SilhouetteWeights
+from samba.silhouette.runs import RowSums, SilhouetteRuns
 
 SIZE = (80, 60)
 

@@ -1,4 +1,4 @@
-"""Tests of `samba.silhouette_tracker`: tree-based filtering of one camera's silhouettes, on
+"""Tests of `samba.silhouette.tracker`: tree-based filtering of one camera's silhouettes, on
 the small tree of `silhouette_fixtures` and noise-free renders of its poses."""
 
 from __future__ import annotations
@@ -13,12 +13,12 @@ from silhouette_fixtures import (
     source_poses,
 )
 
-from samba.body_model import PART_NAMES
-from samba.errors import InputError
-from samba.shape_tree import PART_JOINTS, ShapeTree
-from samba.silhouette_distance import SilhouetteWeights
-from samba.silhouette_render import render_silhouettes
-from samba.silhouette_tracker import SilhouetteTracker, TrackerSettings
+from samba.base.errors import InputError
+from samba.body.body_model import PART_NAMES
+from samba.silhouette.distance import SilhouetteWeights
+from samba.silhouette.render import render_silhouettes
+from samba.silhouette.shape_tree import PART_JOINTS, ShapeTree
+from samba.silhouette.tracker import SilhouetteTracker, TrackerSettings
 
 ARMS = (PART_NAMES.index("l_arm"), PART_NAMES.index("r_arm"))
 

@@ -1,4 +1,4 @@
-"""Tests of `samba.silhouette_view`: where a silhouette stands, and the normalised frame in
+"""Tests of `samba.silhouette.view`: where a silhouette stands, and the normalised frame in
 which silhouettes are compared."""
 
 from __future__ import annotations
@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from silhouette_fixtures import BODY, CAMERA, view
 
-from samba.body_model import ANKLE_HEIGHT_FRACTION
-from samba.camera import Camera
-from samba.errors import InputError
-from samba.silhouette_render import render_silhouettes
-from samba.silhouette_view import HOME_AIM_HEIGHT, HOME_DISTANCE, SilhouetteView
-from samba.skeleton import standard_pose
+from samba.base.errors import InputError
+from samba.body.body_model import ANKLE_HEIGHT_FRACTION
+from samba.body.skeleton import standard_pose
+from samba.cameras.camera import Camera
+from samba.silhouette.render import render_silhouettes
+from samba.silhouette.view import HOME_AIM_HEIGHT, HOME_DISTANCE, SilhouetteView
 
 STANDING = standard_pose(BODY.height) + np.array([0.0, ANKLE_HEIGHT_FRACTION * BODY.height, 0.0])
 """The A-pose at the world origin, facing the camera, its soles on the floor."""

@@ -1,17 +1,17 @@
-"""The labels of every camera of a stage at once (`samba.stage_tracking.StageTracker`)."""
+"""The labels of every camera of a stage at once (`samba.markers.stage_tracking.StageTracker`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from samba.camera import Camera, CameraGroup
-from samba.cross_view_labels import CrossViewSettings
-from samba.marker_tracking import TrackerSettings, subject_distance
-from samba.observation import spread_cameras
-from samba.skeleton import markers_of, standing_pose
-from samba.stage_tracking import StageTracker
-from samba.synthetic_cameras import with_size
+from samba.body.skeleton import markers_of, standing_pose
+from samba.cameras.camera import Camera, CameraGroup
+from samba.cameras.synthetic_cameras import with_size
+from samba.markers.cross_view_labels import CrossViewSettings
+from samba.markers.observation import spread_cameras
+from samba.markers.stage_tracking import StageTracker
+from samba.markers.tracking import TrackerSettings, subject_distance
 
 L_WRIST, L_FOOT = 2, 6
 

@@ -1,4 +1,4 @@
-"""Finding the subject from scratch in the standard pose (`samba.standard_pose_search`),
+"""Finding the subject from scratch in the standard pose (`samba.markers.standard_pose_search`),
 and a capture stage that lost the subject picking it up again: offline (`StageTracker`)
 and in a live session whose server labels the markers."""
 
@@ -9,22 +9,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 from live_fixtures import config
+from samba.service.packet import MAX_BLOBS, MarkerPacket
+from samba.service.pipeline_workers import FrameDone, InlinePipelines
+from samba.service.session import CaptureSession
 from scipy.spatial.transform import Rotation
 
-from samba.calibration_file import write_calibration
-from samba.camera import CameraGroup
-from samba.cross_view_labels import CrossViewSettings
-from samba.errors import InputError
-from samba.lead_in import standing_lead_in
-from samba.observation import spread_cameras
-from samba.skeleton import markers_of, standing_pose
-from samba.stage_tracking import STILL_FRAMES, StageTracker
-from samba.standard_pose_search import StandardPoseSearch
-from samba.synthetic import generate, random_standing
-from samba.synthetic_cameras import detected_blobs, with_size
-from service.packet import MAX_BLOBS, MarkerPacket
-from service.pipeline_workers import FrameDone, InlinePipelines
-from service.session import CaptureSession
+from samba.base.errors import InputError
+from samba.body.skeleton import markers_of, standing_pose
+from samba.cameras.calibration_file import write_calibration
+from samba.cameras.camera import CameraGroup
+from samba.cameras.synthetic_cameras import detected_blobs, with_size
+from samba.markers.cross_view_labels import CrossViewSettings
+from samba.markers.lead_in import standing_lead_in
+from samba.markers.observation import spread_cameras
+from samba.markers.stage_tracking import STILL_FRAMES, StageTracker
+from samba.markers.standard_pose_search import StandardPoseSearch
+from samba.synthetic.motions import generate, random_standing
 
 FPS = 30.0
 

@@ -12,14 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bvh_fixtures import humanoid_bvh
+from samba.db.errors import StoreCorruptedError, StoreError
+from samba.db.index import PoseIndex
+from samba.db.store import CATALOG, INDEX, POSE_BYTES, ROW_BYTES, PoseStore, drop_near_duplicates
+from samba.ingest.batch import import_paths
 
-from db.errors import StoreCorruptedError, StoreError
-from db.index import PoseIndex
-from db.store import CATALOG, INDEX, POSE_BYTES, ROW_BYTES, PoseStore, drop_near_duplicates
-from ingest.batch import import_paths
-from samba.perturb import perturb_joint_angles
-from samba.skeleton import Body, markers_of, mirror_poses
-from samba.take import Take
+from samba.body.perturb import perturb_joint_angles
+from samba.body.skeleton import Body, markers_of, mirror_poses
+from samba.body.take import Take
 
 
 def make_poses(n: int, seed: int) -> np.ndarray:
@@ -768,17 +768,17 @@ def test_imports_read_only_their_own_catalog_rows(
 ) -> None:
     # Re-reading the whole catalog after each import made importing a folder of 2,000
     # files quadratic (109 ms per file at the end, against 8.5 ms now).
-    import db.store
+    import samba.db.store
 
     rows_read = []
-    read_takes = db.store.read_takes
+    read_takes = samba.db.store.read_takes
 
     def counting(*args: object, **kwargs: object) -> list:
         takes = read_takes(*args, **kwargs)
         rows_read.append(len(takes))
         return takes
 
-    monkeypatch.setattr(db.store, "read_takes", counting)
+    monkeypatch.setattr(samba.db.store, "read_takes", counting)
     store = PoseStore.create(path)
     for i in range(40):
         store.add(make_take(f"t{i}", 5, seed=i), mirror=i % 2 == 0, build_index=False)

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from samba.db.index import PoseIndex
+from samba.db.store import INDEX, POSE_BYTES, ROW_BYTES, PoseStore
 from store_writer import (
     apply,
     is_mirrored,
@@ -32,9 +34,7 @@ from store_writer import (
     writer_take,
 )
 
-from db.index import PoseIndex
-from db.store import INDEX, POSE_BYTES, ROW_BYTES, PoseStore
-from samba.skeleton import markers_of, mirror_poses
+from samba.body.skeleton import markers_of, mirror_poses
 
 ROOT = Path(__file__).resolve().parents[1]
 WRITER = Path(__file__).with_name("store_writer.py")

@@ -1,4 +1,4 @@
-"""Tests of the procedural motion generator `samba.synthetic`."""
+"""Tests of the procedural motion generator `samba.synthetic.motions`."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from functools import cache
 import numpy as np
 import pytest
 
-from samba.skeleton import Body, bone_lengths
-from samba.synthetic import MOTIONS, generate, library, random_body
-from samba.take import Take
+from samba.body.skeleton import Body, bone_lengths
+from samba.body.take import Take
+from samba.synthetic.motions import MOTIONS, generate, library, random_body
 
 CONTACT_MOTIONS = ("walk", "squat", "wave", "arm_swing", "turn", "kick", "golf_swing", "point")
 FLIGHT_MOTIONS = ("run", "jumping_jacks")

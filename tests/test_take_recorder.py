@@ -15,19 +15,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from samba.db.store import PoseStore
+from samba.ingest.bvh import read_bvh
+from samba.ingest.errors import TakeFileError
+from samba.ingest.mcap_take import read_take
+from samba.service.errors import ServiceError
+from samba.service.take_recorder import SKELETON_LINES, TakeRecorder
 
-from db.store import PoseStore
-from ingest.bvh import read_bvh
-from ingest.errors import TakeFileError
-from ingest.mcap_take import read_take
+from samba.base.errors import InputError
+from samba.body.skeleton import markers_of
+from samba.body.take import Take
 from samba.cli import main
-from samba.errors import InputError
-from samba.reconstruction import PoseEstimate
-from samba.skeleton import markers_of
-from samba.synthetic import generate
-from samba.take import Take
-from service.errors import ServiceError
-from service.take_recorder import SKELETON_LINES, TakeRecorder
+from samba.reconstruct.reconstruction import PoseEstimate
+from samba.synthetic.motions import generate
 
 ROOT = Path(__file__).resolve().parents[1]
 T0 = 1_700_000_000_000_000_000
@@ -195,10 +195,10 @@ def test_exporting_a_recovered_take_warns_what_it_lost(
 
 KILLED_RECORDER = f"""
 import sys, time
-from samba.reconstruction import PoseEstimate
-from samba.skeleton import markers_of
-from samba.synthetic import generate
-from service.take_recorder import TakeRecorder
+from samba.reconstruct.reconstruction import PoseEstimate
+from samba.body.skeleton import markers_of
+from samba.synthetic.motions import generate
+from samba.service.take_recorder import TakeRecorder
 
 take = generate("walk", seconds=2)
 recorder = TakeRecorder(sys.argv[1], take.fps, flush_interval_s=3600)

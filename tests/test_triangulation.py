@@ -1,12 +1,12 @@
-"""Tests of DLT triangulation `samba.triangulation`."""
+"""Tests of DLT triangulation `samba.cameras.triangulation`."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from samba.camera import Camera
-from samba.triangulation import Triangulation, triangulate, triangulate_cameras
+from samba.cameras.camera import Camera
+from samba.cameras.triangulation import Triangulation, triangulate, triangulate_cameras
 
 SIZE = (160, 120)
 

@@ -16,16 +16,16 @@ import numpy as np
 import pytest
 from export_fixtures import box_mesh, real_takes, synthetic_motion
 from pxr import Gf, Usd, UsdGeom, UsdSkel
+from samba.export.avatar_mesh import AvatarMesh
+from samba.export.errors import ExportError
+from samba.export.humanoid import BONE_INDEX, N_BONES, HumanoidRig
+from samba.export.motion import HumanoidMotion
+from samba.export.retarget import bone_direction_errors, retarget
+from samba.export.usd_reader import read_usd_joint_positions, usd_validation_errors
+from samba.export.usd_writer import write_usd
 
-from export.avatar_mesh import AvatarMesh
-from export.errors import ExportError
-from export.humanoid import BONE_INDEX, N_BONES, HumanoidRig
-from export.motion import HumanoidMotion
-from export.retarget import bone_direction_errors, retarget
-from export.usd_reader import read_usd_joint_positions, usd_validation_errors
-from export.usd_writer import write_usd
-from samba import synthetic
-from samba.take import Take
+from samba.body.take import Take
+from samba.synthetic import motions as synthetic
 
 ROOT = Path(__file__).resolve().parents[1]
 HEADERS = {".usda": b"#usda 1.0", ".usdc": b"PXR-USDC", ".usd": b"PXR-USDC"}
@@ -110,9 +110,9 @@ def _assert_body(body: UsdGeom.Mesh, mesh: AvatarMesh) -> None:
 
 
 def test_mannequin_export_validates(tmp_path: Path) -> None:
-    if importlib.util.find_spec("export.mannequin") is None:
-        pytest.skip("export.mannequin is not there yet")
-    mannequin = importlib.import_module("export.mannequin").mannequin
+    if importlib.util.find_spec("samba.export.mannequin") is None:
+        pytest.skip("samba.export.mannequin is not there yet")
+    mannequin = importlib.import_module("samba.export.mannequin").mannequin
     take, motion = synthetic_motion("wave")
     mesh = mannequin(motion.rig)
     for suffix in (".usda", ".usdc"):
@@ -241,8 +241,8 @@ def test_failure_midway_leaves_existing_file_untouched(tmp_path: Path, suffix: s
         f"""
         import resource, signal, sys
         from test_gltf_export import synthetic_motion
-        from export.errors import ExportError
-        from export.usd_writer import write_usd
+        from samba.export.errors import ExportError
+        from samba.export.usd_writer import write_usd
 
         _, motion = synthetic_motion()
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)

@@ -18,11 +18,8 @@ import aiohttp
 import numpy as np
 import pytest
 from aiohttp import web
-
-from samba.skeleton import JOINT_NAMES, MARKER_NAMES, markers_of
-from samba.synthetic import generate
-from service.take_recorder import SKELETON_LINES
-from service.viewer import (
+from samba.service.take_recorder import SKELETON_LINES
+from samba.service.viewer import (
     CONTENT_SECURITY_POLICY,
     VIEWER_PAGE,
     ViewerHub,
@@ -30,6 +27,9 @@ from service.viewer import (
     frame_message,
     hello_message,
 )
+
+from samba.body.skeleton import JOINT_NAMES, MARKER_NAMES, markers_of
+from samba.synthetic.motions import generate
 from tests.chromium_page import ChromiumPage, find_chromium
 
 FPS = 30.0

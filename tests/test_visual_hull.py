@@ -1,4 +1,4 @@
-"""Tests of `samba.voxel_grid` and the silhouette carving of `samba.visual_hull`."""
+"""Tests of `samba.volume.voxel_grid` and the silhouette carving of `samba.volume.visual_hull`."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from samba.body_model import BodyModel, scaled_to
-from samba.camera import Camera
-from samba.errors import InputError
-from samba.skeleton import standard_pose
-from samba.visual_hull import OUTSIDE, VisualHull, human_volumes, volume_cameras
-from samba.voxel_grid import VoxelGrid
+from samba.base.errors import InputError
+from samba.body.body_model import BodyModel, scaled_to
+from samba.body.skeleton import standard_pose
+from samba.cameras.camera import Camera
+from samba.volume.visual_hull import OUTSIDE, VisualHull, human_volumes, volume_cameras
+from samba.volume.voxel_grid import VoxelGrid
 
 GRID = VoxelGrid.from_bounds((-1.0, 0.0, -0.625), (1.0, 2.0, 0.625), 0.025)
 CAMERAS = volume_cameras(GRID)

@@ -6,15 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from samba.articulated_figure import creature_motion, long_chain, quadruped
-from samba.errors import InputError
-from samba.frame_kinematics import Branch, FrameModel, frame_model
-from samba.isomap import VoxelGraph, isomap
-from samba.sequence_model import fit_sequence
-from samba.spherical_shells import skeleton_curve, sweep_and_prune
-from samba.volume_capture import capture_volumes
-from samba.volume_evaluation import HumanReport, creature_take, exaggerated, human_take
-from samba.voxel_grid import VoxelGrid
+from samba.base.errors import InputError
+from samba.volume.articulated_figure import creature_motion, long_chain, quadruped
+from samba.volume.capture import capture_volumes
+from samba.volume.evaluation import HumanReport, creature_take, exaggerated, human_take
+from samba.volume.frame_kinematics import Branch, FrameModel, frame_model
+from samba.volume.isomap import VoxelGraph, isomap
+from samba.volume.sequence_model import fit_sequence
+from samba.volume.spherical_shells import skeleton_curve, sweep_and_prune
+from samba.volume.voxel_grid import VoxelGrid
 
 
 def _box(low: tuple[int, int, int], high: tuple[int, int, int]) -> np.ndarray:
@@ -387,7 +387,7 @@ def test_fast_jumping_jack_arms_stay_matched_across_frames() -> None:
 
 
 def test_exaggerated_poses_keep_bone_lengths() -> None:
-    from samba.synthetic import generate
+    from samba.synthetic.motions import generate
 
     poses = generate("jumping_jacks", 1.0, 10.0, seed=4).poses.astype(np.float64)
     spread = exaggerated(poses)

@@ -1,0 +1,419 @@
+"""13 joints from 8 markers: the Samba paper's data-driven reconstruction (Section 4).
+
+Per frame: align the observed markers into the database frame (`samba.body.alignment`, as
+the pose index does), take the K nearest database poses, aligned by the same markers,
+grow N pseudo-poses from each (`samba.reconstruct.pseudo_poses`), build the local pose space of the
+K * N samples and minimise prior + marker + smoothness energy in it
+(`samba.reconstruct.local_space`); the pose goes back to the world frame.
+
+Three paths share every step: `Reconstructor.step` for the live service (one frame at a
+time, keeping the two previous estimates of the energy solution for the smoothness
+term), `reconstruct_together` for live sessions whose frames arrive together (one
+frame of each in one batch) and `Reconstructor.reconstruct` for whole takes offline
+(all frames batched; only a 39 x 39 matrix-vector product per frame runs in sequence).
+All give the same poses.
+
+Missing markers are NaN. Retrieval and the marker term use the markers present; the
+smoothness term predicts the rest. A frame with fewer than `min_markers` markers or
+without a complete left/right marker pair to set the heading is not reconstructed: the
+pose is predicted from the previous estimates (velocity halved every frame, so it comes
+to rest), or, before any estimate, the standard pose is placed at the markers seen;
+it is flagged as predicted and not confident. No input produces a NaN pose.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Protocol
+
+import numpy as np
+
+from samba.body.alignment import Alignment, has_heading
+from samba.body.skeleton import N_JOINTS, N_MARKERS, markers_of, standard_pose
+from samba.reconstruct.local_space import (
+    POSE_DIMS,
+    EnergyTerms,
+    LocalPoseSpace,
+    affine_solution,
+    initial_weights,
+    solve_lm,
+)
+from samba.reconstruct.part_retrieval import refine_with_parts
+from samba.reconstruct.pseudo_poses import AngleNoise, pseudo_poses
+
+
+class NeighbourSource(Protocol):
+    """Anything with a k-nearest-pose query over a pose array, e.g. `samba.db.index.PoseIndex`."""
+
+    poses: np.ndarray
+    """(n, 13, 3) database poses, meters."""
+    scale_by_tibia: bool
+    """Whether the query compares tibia-normalised markers (`samba.body.alignment`)."""
+
+    def query(
+        self, markers: np.ndarray, k: int = 10, eps: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(distances, row indices), each (b, k), of markers (b, 8, 3) with NaN = missing."""
+        ...
+
+
+@dataclass(frozen=True)
+class ReconstructionConfig:
+    """Parameters of the reconstruction; the defaults are the paper's configuration
+    (`samba.reconstruct.methods.PAPER`, which says how the values the paper leaves open
+    were chosen).
+
+    `k` neighbours and `n` pseudo-poses each (n = 1: none, the neighbours alone), joint
+    noise `noise_deg` (standard deviation, degrees), PCA truncation `variance_kept`
+    (fraction of variance, 1 = none) with variances floored at `variance_floor` (m^2).
+    The energy weighs markers by alpha = 1 / marker_sigma^2 and smoothness by
+    beta = 1 / smooth_sigma^2 (sigmas in meters); `min_markers` markers with a complete
+    left/right pair are needed to reconstruct; a frame is confident when its marker RMS
+    residual is at most `confident_residual` meters with at least 6 markers. `seed` fixes
+    the pseudo-pose noise table; `eps` is passed to the index query (0 = exact).
+    `part_k` > 0 re-estimates elbows, hips and head from their own `part_k` nearest poses
+    (`samba.reconstruct.part_retrieval`); 0 keeps the paper's single retrieval. `missing_sigma` > 0
+    (meters) holds the joint of a missing marker to its motion prediction with weight
+    1 / missing_sigma^2 on top of the smoothness term; 0 leaves it to the pose space.
+    """
+
+    k: int = 10
+    n: int = 10
+    noise_deg: float = 5.0
+    variance_kept: float = 0.999
+    variance_floor: float = 1e-6
+    marker_sigma: float = 0.005
+    smooth_sigma: float = 0.08
+    min_markers: int = 3
+    confident_residual: float = 0.03
+    seed: int = 0
+    eps: float = 0.0
+    part_k: int = 0
+    missing_sigma: float = 0.0
+    bandwidth: float = 0.0
+    min_bandwidth: float = 0.005
+
+    def __post_init__(self) -> None:
+        if self.k < 1 or self.n < 1:
+            raise ValueError(f"K and N must be >= 1, got K={self.k}, N={self.n}")
+        if not 0.0 < self.variance_kept <= 1.0:
+            raise ValueError(f"variance_kept must be in (0, 1], got {self.variance_kept}")
+        if self.marker_sigma <= 0 or self.smooth_sigma <= 0:
+            raise ValueError("marker_sigma and smooth_sigma must be positive")
+
+    @property
+    def alpha(self) -> float:
+        """Marker-term weight, 1/m^2."""
+        return 1.0 / self.marker_sigma**2
+
+    @property
+    def beta(self) -> float:
+        """Smoothness-term weight, 1/m^2."""
+        return 1.0 / self.smooth_sigma**2
+
+    @property
+    def beta_missing(self) -> float:
+        """Extra smoothness weight on the joints of missing markers, 1/m^2 (0: none)."""
+        return 1.0 / self.missing_sigma**2 if self.missing_sigma > 0 else 0.0
+
+
+@dataclass(frozen=True)
+class Reconstruction:
+    """Reconstructed frames: `poses` (F, 13, 3) world meters, `residual` (F,) RMS marker
+    error in meters over the markers used (0 when predicted), `markers_used` (F,) int,
+    `confident` (F,) bool, `predicted` (F,) bool (pose predicted, not reconstructed)."""
+
+    poses: np.ndarray
+    residual: np.ndarray
+    markers_used: np.ndarray
+    confident: np.ndarray
+    predicted: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    def estimate(self, i: int) -> PoseEstimate:
+        """Frame i as a `PoseEstimate`."""
+        return PoseEstimate(
+            pose=self.poses[i],
+            residual=float(self.residual[i]),
+            markers_used=int(self.markers_used[i]),
+            confident=bool(self.confident[i]),
+            predicted=bool(self.predicted[i]),
+        )
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """One reconstructed frame: `pose` (13, 3) world meters, `residual` meters,
+    `markers_used`, `confident`, `predicted` as in `Reconstruction`."""
+
+    pose: np.ndarray
+    residual: float
+    markers_used: int
+    confident: bool
+    predicted: bool
+
+
+@dataclass(frozen=True)
+class _Solved:
+    """Per-frame affine maps from the smoothness target to the pose, world frame:
+    pose = offset + gain @ (target - anchor), all (b, 39) / (b, 39, 39) meters."""
+
+    offset: np.ndarray
+    gain: np.ndarray
+    anchor: np.ndarray
+
+
+class Reconstructor:
+    """Reconstructs 13-joint poses from 8 markers with a pose database.
+
+    `source` gives the K nearest poses (a `samba.db.index.PoseIndex`, or anything with its
+    `query`, `poses` and `scale_by_tibia`). The reconstructor keeps the last two
+    estimates for the smoothness term; `reset` forgets them (a new take).
+    """
+
+    def __init__(self, source: NeighbourSource, config: ReconstructionConfig | None = None):
+        self.source = source
+        self.config = config or ReconstructionConfig()
+        self.noise = AngleNoise.draw(
+            self.config.k, self.config.n, self.config.noise_deg, self.config.seed
+        )
+        self._history: list[np.ndarray] = []
+        self.prepare(1)
+
+    def prepare(self, most_missing: int = 1) -> int:
+        """Query the standard pose once with every set of 1 to `most_missing` markers
+        missing that keeps a left/right pair (and, with parts, each part's markers of
+        it), so that an index making masked tables lazily makes them now rather than in
+        the first frames of a live capture that lose those markers: such a frame would
+        stall by the table's build (30-45 ms at 10^4 poses, seconds at 10^6). The
+        constructor prepares single missing markers. Returns the observations queried."""
+        sets = [
+            missing
+            for count in range(1, most_missing + 1)
+            for missing in itertools.combinations(range(N_MARKERS), count)
+        ]
+        markers = np.repeat(markers_of(standard_pose())[None], len(sets) + 1, axis=0)
+        for row, missing in enumerate(sets, start=1):
+            markers[row, list(missing)] = np.nan
+        markers = markers[self.usable(~np.isnan(markers).any(axis=-1))]
+        if len(markers) > 1:
+            self.source.query(markers[1:], k=1, eps=self.config.eps)
+        if self.config.part_k:
+            poses = np.repeat(standard_pose()[None], len(markers), axis=0)
+            refine_with_parts(self.source, markers, poses, 1, self.config.eps)
+        return len(markers) - 1
+
+    def reset(self) -> None:
+        """Forget the previous estimates."""
+        self._history = []
+
+    def step(self, markers: np.ndarray) -> PoseEstimate:
+        """Reconstruct one frame from markers (8, 3), world meters, NaN = missing."""
+        return self.reconstruct(np.asarray(markers, dtype=np.float64)[None]).estimate(0)
+
+    def reconstruct(self, markers: np.ndarray) -> Reconstruction:
+        """Reconstruct consecutive frames from markers (F, 8, 3), world meters, NaN =
+        missing; continues from (and updates) the previous estimates."""
+        markers = _checked_markers(markers)
+        return _reconstruct(self, [self] * len(markers), markers)
+
+    def usable(self, present: np.ndarray) -> np.ndarray:
+        """(F,) frames with enough markers present (F, 8) to be reconstructed."""
+        return has_heading(present) & (present.sum(axis=1) >= self.config.min_markers)
+
+    def neighbours(self, markers: np.ndarray) -> tuple[Alignment, np.ndarray, np.ndarray]:
+        """The retrieval step for usable frames' markers (b, 8, 3): the observations'
+        alignment, the aligned markers (b, 8, 3) and the K nearest poses (b, K, 13, 3),
+        each aligned by its own markers masked like the observation's; canonical frame."""
+        cfg = self.config
+        scale = self.source.scale_by_tibia
+        alignment = Alignment.from_markers(markers, scale_by_tibia=scale)
+        aligned = alignment.apply(markers)
+        _, rows = self.source.query(markers, k=cfg.k, eps=cfg.eps)
+        poses = np.asarray(self.source.poses[rows.reshape(-1)], dtype=np.float64)
+        seen = markers_of(poses.reshape(len(markers), cfg.k, N_JOINTS, 3))
+        seen = np.where(np.isnan(markers)[:, None], np.nan, seen).reshape(-1, N_MARKERS, 3)
+        poses = Alignment.from_markers(seen, scale_by_tibia=scale).apply(poses)
+        return alignment, aligned, poses.reshape(len(markers), cfg.k, N_JOINTS, 3)
+
+    def local_spaces(
+        self, markers: np.ndarray
+    ) -> tuple[Alignment, np.ndarray, LocalPoseSpace, np.ndarray]:
+        """The retrieval and pose-space steps for usable frames' markers (b, 8, 3).
+
+        Returns the observations' alignment, the aligned markers (b, 8, 3), the local
+        pose spaces and their samples (b, K * N, 13, 3), all in the canonical frame.
+        """
+        cfg = self.config
+        alignment, aligned, neighbours = self.neighbours(markers)
+        samples = pseudo_poses(neighbours, self.noise)
+        samples = samples.reshape(len(markers), -1, N_JOINTS, 3)
+        weights = self.sample_weights(aligned, samples) if cfg.bandwidth else None
+        space = LocalPoseSpace.from_samples(samples, cfg.variance_kept, cfg.variance_floor, weights)
+        return alignment, aligned, space, samples
+
+    def sample_weights(self, aligned: np.ndarray, samples: np.ndarray) -> np.ndarray:
+        """Kernel weights (b, M) of samples (b, M, 13, 3) by the distance d of their markers
+        to the aligned observation (b, 8, 3) over the markers present: exp(-(d / h)^2)
+        with h = `bandwidth` times the nearest sample's distance, at least
+        `min_bandwidth` meters."""
+        present = (~np.isnan(aligned).any(axis=-1)).astype(np.float64)
+        diff = markers_of(samples) - np.nan_to_num(aligned)[:, None]
+        d2 = np.matmul(np.square(diff).sum(axis=-1), present[:, :, None])[:, :, 0]
+        h2 = np.maximum(d2.min(axis=1) * self.config.bandwidth**2, self.config.min_bandwidth**2)
+        return np.exp(-d2 / h2[:, None])
+
+    def _solve_batch(self, markers: np.ndarray, has_target: np.ndarray) -> _Solved:
+        """Everything but the smoothness target, for usable frames (b, 8, 3); frames
+        without a target (the first of a take) get no smoothness term."""
+        alignment, aligned, space, _ = self.local_spaces(markers)
+        cfg = self.config
+        terms = EnergyTerms(
+            aligned,
+            np.zeros((len(markers), N_JOINTS, 3)),
+            has_target,
+            cfg.alpha,
+            cfg.beta,
+            cfg.beta_missing,
+        )
+        offset, gain = affine_solution(space, terms)
+        # To world: q_w = o + R^T q_c / s with q_c = offset + gain @ (s R (t_w - o)), so
+        # the world gain is R^T gain R: per joint, R^T on its rows and R on its columns.
+        b = len(markers)
+        r = alignment.rotation[:, None]  # (b, 1, 3, 3)
+        gain_w = np.matmul(r.swapaxes(-1, -2), gain.reshape(b, N_JOINTS, 3, POSE_DIMS))
+        gain_w = np.matmul(gain_w.reshape(b, POSE_DIMS, N_JOINTS, 3), r)
+        offset_w = alignment.invert(offset.reshape(b, N_JOINTS, 3)).reshape(b, POSE_DIMS)
+        anchor = np.broadcast_to(alignment.origin[:, None], (b, N_JOINTS, 3)).reshape(b, POSE_DIMS)
+        return _Solved(offset_w, gain_w.reshape(b, POSE_DIMS, POSE_DIMS), anchor)
+
+    def _apply(self, solved: _Solved, i: int) -> np.ndarray:
+        """Frame i's pose (39,), world, given the history."""
+        if not self._history:
+            return solved.offset[i]
+        if len(self._history) == 1:
+            target = self._history[0]
+        else:
+            target = 2.0 * self._history[0] - self._history[1]
+        return solved.offset[i] + solved.gain[i] @ (target - solved.anchor[i])
+
+    def _predict(self, markers: np.ndarray, present: np.ndarray) -> np.ndarray:
+        """A pose (39,) for a frame that cannot be reconstructed."""
+        if len(self._history) == 2:
+            return self._history[0] + 0.5 * (self._history[0] - self._history[1])
+        if self._history:
+            return self._history[0]
+        pose = standard_pose()
+        if present.any():
+            pose += markers[present].mean(axis=0) - markers_of(pose)[present].mean(axis=0)
+        return pose.reshape(-1)
+
+    def initial_weights(self, markers: np.ndarray) -> np.ndarray:
+        """The paper's initial value w0 (39,) for one usable frame's markers (8, 3)."""
+        _, aligned, space, samples = self.local_spaces(markers[None])
+        return initial_weights(space, samples[0], aligned[0])
+
+    def solve_lm(self, markers: np.ndarray, target: np.ndarray | None = None) -> np.ndarray:
+        """One frame (8, 3) solved by Levenberg-Marquardt from the paper's initial value,
+        with smoothness target 2 q_{i-1} - q_{i-2} (13, 3) in world meters or none;
+        returns the world pose (13, 3). For comparison with the fast path."""
+        alignment, aligned, space, samples = self.local_spaces(markers[None])
+        has_target = target is not None
+        t = alignment.apply(target[None]) if has_target else np.zeros((1, N_JOINTS, 3))
+        cfg = self.config
+        terms = EnergyTerms(
+            aligned, t, np.array([has_target]), cfg.alpha, cfg.beta, cfg.beta_missing
+        )
+        w0 = initial_weights(space, samples[0], aligned[0])
+        pose = solve_lm(space, terms, w0)
+        return alignment.invert(pose[None])[0]
+
+
+def reconstruct_together(
+    reconstructors: Sequence[Reconstructor], markers: np.ndarray
+) -> Reconstruction:
+    """Frames of several reconstructors computed as one batch: frame i, markers[i] of
+    (F, 8, 3) world meters with NaN = missing, continues (and updates) the estimates of
+    reconstructors[i], in order, with the poses `reconstructors[i].step(markers[i])` would
+    give. Live sessions that search one database do this with the frames that arrive
+    together: four frames cost about 1.5 times one (`Reconstructor.step` in a live
+    process: 1.6 ms for one, 2.5 ms for four).
+
+    The reconstructors must be of one class, with equal configurations and the same
+    source object (`ValueError` otherwise)."""
+    markers = _checked_markers(markers)
+    if len(reconstructors) != len(markers) or not len(markers):
+        raise ValueError(
+            f"one frame per reconstructor: {len(reconstructors)} reconstructors, "
+            f"{len(markers)} frames"
+        )
+    first = reconstructors[0]
+    if any(
+        type(r) is not type(first) or r.source is not first.source or r.config != first.config
+        for r in reconstructors
+    ):
+        raise ValueError("reconstructors run together must share class, configuration and source")
+    return _reconstruct(first, list(reconstructors), markers)
+
+
+def _reconstruct(
+    model: Reconstructor, owners: list[Reconstructor], markers: np.ndarray
+) -> Reconstruction:
+    """Frames (F, 8, 3) in order, frame i continuing owners[i]'s estimates; every owner
+    shares the class, configuration and source of `model`."""
+    cfg = model.config
+    present = ~np.isnan(markers).any(axis=-1)
+    usable = model.usable(present)
+    frames = np.flatnonzero(usable)
+    started: set[int] = set()
+    has_target = np.empty(len(owners), dtype=bool)
+    for i, owner in enumerate(owners):
+        has_target[i] = bool(owner._history) or id(owner) in started
+        started.add(id(owner))
+    solved = model._solve_batch(markers[frames], has_target[frames]) if len(frames) else None
+    poses = np.empty((len(markers), POSE_DIMS))
+    slot = np.full(len(markers), -1)
+    slot[frames] = np.arange(len(frames))
+    for i, owner in enumerate(owners):
+        predicted = slot[i] < 0
+        q = owner._predict(markers[i], present[i]) if predicted else owner._apply(solved, slot[i])
+        poses[i] = q
+        owner._history = [q, *owner._history[:1]]
+    poses = poses.reshape(-1, N_JOINTS, 3)
+    if cfg.part_k and len(frames):
+        # Missing markers are filled with the main estimate, so every part is queried.
+        seen = markers[frames]
+        filled = np.where(np.isnan(seen), markers_of(poses[frames]), seen)
+        poses[frames] = refine_with_parts(model.source, filled, poses[frames], cfg.part_k, cfg.eps)
+    diff = np.where(present[..., None], markers_of(poses) - markers, 0.0)
+    squared = np.einsum("fmc,fmc->fm", diff, diff)
+    used = np.where(usable, present.sum(axis=1), 0)
+    residual = np.sqrt(squared.sum(axis=1) / np.maximum(used, 1)) * usable
+    confident = usable & (used >= 6) & (residual <= cfg.confident_residual)
+    return Reconstruction(poses, residual, used, confident, ~usable)
+
+
+def _checked_markers(markers: np.ndarray) -> np.ndarray:
+    """Markers (F, 8, 3) as float64 with every non-finite marker NaN; `ValueError` for
+    another shape."""
+    markers = np.asarray(markers, dtype=np.float64)
+    if markers.ndim != 3 or markers.shape[1:] != (N_MARKERS, 3):
+        raise ValueError(f"markers must be (F, 8, 3), got {markers.shape}")
+    return np.where(np.isfinite(markers).all(axis=-1, keepdims=True), markers, np.nan)
+
+
+class NearestPose(Reconstructor):
+    """The `nn` baseline: the nearest database pose (K = 1), aligned onto the observation
+    by the same alignment, without pseudo-poses or energy."""
+
+    def __init__(self, source: NeighbourSource, config: ReconstructionConfig | None = None):
+        super().__init__(source, replace(config or ReconstructionConfig(), k=1, n=1))
+
+    def _solve_batch(self, markers: np.ndarray, has_target: np.ndarray) -> _Solved:
+        alignment, _, neighbours = self.neighbours(markers)
+        world = alignment.invert(neighbours[:, 0]).reshape(len(markers), POSE_DIMS)
+        return _Solved(world, np.zeros((len(markers), POSE_DIMS, POSE_DIMS)), world)

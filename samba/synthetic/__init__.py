@@ -1,0 +1,3 @@
+"""The built-in motions: procedural takes on the 13-joint skeleton, the pose database when
+no real motion capture is there.
+"""
