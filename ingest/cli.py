@@ -9,7 +9,7 @@ import sys
 import numpy as np
 from samba.db.errors import QueryError
 from samba.db.store import PoseStore
-from samba.db.tree_cli import add_tree_command
+from samba.db.cli import add_tree_command
 from samba.ingest.batch import import_paths
 from samba.ingest.bvh_take import BvhImportOptions
 from samba.ingest.normalize import UNITS, UP_AXES

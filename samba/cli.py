@@ -25,7 +25,7 @@ AREAS: dict[str, tuple[str, str]] = {
         "samba.evaluation.experiment",
         "accuracy and speed of every reconstruction method on BVH takes",
     ),
-    "calibrate": ("samba.calibrate_cli", "calibrate cameras from images or videos of a board"),
+    "calibrate": ("samba.cameras.recordings", "calibrate cameras from images or videos of a board"),
     "export": (
         "samba.export.cli",
         "retarget takes to a humanoid avatar and write USD, glTF or BVH",

@@ -21,7 +21,7 @@ import time
 from collections.abc import Iterator
 
 import numpy as np
-from samba.db.tree_cli import chosen_body, chosen_home, tree_for
+from samba.db.cli import chosen_body, chosen_home, tree_for
 from samba.service.node import (
     DEFAULT_FPS,
     DEFAULT_PORT,

@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
-from samba.db.tree_cli import (
+from samba.db.cli import (
     add_camera_arguments,
     chosen_body,
     chosen_camera,
