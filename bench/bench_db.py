@@ -38,16 +38,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from samba.db.index import APPROXIMATE_EPS, SCAN_LIMIT, PoseIndex, marker_features  # noqa: E402
-from samba.db.store import PoseStore  # noqa: E402
-from samba.ingest.batch import import_paths  # noqa: E402
-from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
 from text_table import print_table  # noqa: E402
 
 from samba.body.alignment import align_markers  # noqa: E402
 from samba.body.perturb import perturb_joint_angles  # noqa: E402
 from samba.body.skeleton import N_MARKERS, markers_of  # noqa: E402
 from samba.body.take import Take  # noqa: E402
+from samba.db.index import APPROXIMATE_EPS, SCAN_LIMIT, PoseIndex, marker_features  # noqa: E402
+from samba.db.store import PoseStore  # noqa: E402
+from samba.ingest.batch import import_paths  # noqa: E402
+from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
 
 K = 10
 SCANNED_UP_TO = 200_000

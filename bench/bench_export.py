@@ -32,6 +32,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from text_table import print_table  # noqa: E402
+
 from samba.export.avatar_mesh import AvatarMesh  # noqa: E402
 from samba.export.bvh_writer import write_bvh  # noqa: E402
 from samba.export.gltf_reader import read_glb_joint_positions  # noqa: E402
@@ -39,13 +41,11 @@ from samba.export.gltf_writer import write_glb  # noqa: E402
 from samba.export.humanoid import BONE_NAMES, HumanoidRig  # noqa: E402
 from samba.export.mannequin import mannequin  # noqa: E402
 from samba.export.motion import HumanoidMotion  # noqa: E402
-from samba.export.retarget import bone_direction_errors, retarget  # noqa: E402
+from samba.export.retargeting import bone_direction_errors, retarget  # noqa: E402
 from samba.export.usd_reader import read_usd_joint_positions  # noqa: E402
 from samba.export.usd_writer import write_usd  # noqa: E402
 from samba.ingest.bvh import read_bvh  # noqa: E402
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take  # noqa: E402
-from text_table import print_table  # noqa: E402
-
 from samba.synthetic.motions import generate  # noqa: E402
 
 TARGET_RETARGET_FPS = 20_000

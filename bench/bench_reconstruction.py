@@ -25,12 +25,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from samba.db.index import PoseIndex  # noqa: E402
-from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
 from text_table import print_table  # noqa: E402
 
 from samba.body.skeleton import mirror_poses  # noqa: E402
+from samba.db.index import PoseIndex  # noqa: E402
 from samba.evaluation.protocol import capture_take  # noqa: E402
+from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
 from samba.reconstruct.methods import METHODS  # noqa: E402
 from samba.reconstruct.reconstruction import Reconstructor  # noqa: E402
 from samba.synthetic.motions import generate, library  # noqa: E402

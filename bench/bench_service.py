@@ -58,19 +58,19 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
+from text_table import print_table  # noqa: E402
+
+from samba.cameras.calibration_file import write_calibration  # noqa: E402
+from samba.cameras.triangulation import Triangulation  # noqa: E402
 from samba.db.store import PoseStore  # noqa: E402
 from samba.db.synthetic_store import build_synthetic_store  # noqa: E402
+from samba.reconstruct.methods import method  # noqa: E402
 from samba.service.frame_pipeline import CameraMarkers, FramePipeline, process_together  # noqa: E402
 from samba.service.packet import encode  # noqa: E402
 from samba.service.session_config import LABELLERS, SessionConfig  # noqa: E402
 from samba.service.session_indexes import SessionIndexes  # noqa: E402
 from samba.service.synthetic_capture import SyntheticCapture  # noqa: E402
 from samba.service.udp_input import UdpInput  # noqa: E402
-from text_table import print_table  # noqa: E402
-
-from samba.cameras.calibration_file import write_calibration  # noqa: E402
-from samba.cameras.triangulation import Triangulation  # noqa: E402
-from samba.reconstruct.methods import method  # noqa: E402
 
 TARGET_P99_MS = 10.0
 FPS = 60.0

@@ -42,12 +42,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
 from text_table import print_table  # noqa: E402
 
 from samba.body.body_model import BodyModel  # noqa: E402
 from samba.body.skeleton import mirror_poses  # noqa: E402
 from samba.cameras.camera import Camera  # noqa: E402
+from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
 from samba.silhouette.distance import SilhouetteWeights  # noqa: E402
 from samba.silhouette.evaluation import (  # noqa: E402
     FAILURE_CM,

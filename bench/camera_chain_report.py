@@ -46,12 +46,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take  # noqa: E402
 from text_table import print_table  # noqa: E402
 
 from samba.body.skeleton import markers_of  # noqa: E402
 from samba.cameras.camera import CameraGroup  # noqa: E402
 from samba.cameras.synthetic_cameras import detected_blobs, with_size  # noqa: E402
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take  # noqa: E402
 from samba.markers.camera_chain import ChainSettings, run_chain  # noqa: E402
 from samba.markers.cross_view_labels import CrossViewSettings  # noqa: E402
 from samba.markers.lead_in import standing_lead_in  # noqa: E402

@@ -1,12 +1,14 @@
-"""The pose database: a crash-safe store of 13-joint poses and its prebuilt k-d tree index.
-
-`PoseStore` (store.py) holds takes and poses; `PoseIndex` (index.py) answers k-nearest
-queries for marker observations. Foreign formats are `ingest`'s business.
+"""The pose database: a crash-safe store of 13-joint takes (`PoseStore`), its prebuilt
+k-nearest index (`PoseIndex`), and the silhouette shape trees saved beside the poses.
+Foreign file formats are `samba.ingest`'s business.
 """
+
 
 from samba.db.errors import QueryError, StoreCorruptedError, StoreError
 from samba.db.index import PoseIndex
+from samba.db.shape_tree_file import read_shape_tree, stored_tree, tree_path, write_shape_tree
 from samba.db.store import AddResult, PoseStore, VerifyReport
+from samba.db.synthetic_store import build_synthetic_store
 
 __all__ = [
     "AddResult",
@@ -16,4 +18,9 @@ __all__ = [
     "StoreCorruptedError",
     "StoreError",
     "VerifyReport",
+    "build_synthetic_store",
+    "read_shape_tree",
+    "stored_tree",
+    "tree_path",
+    "write_shape_tree",
 ]

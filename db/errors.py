@@ -1,6 +1,6 @@
 """Errors raised by the pose store and its index."""
 
-from samba.base.errors import InputError, SambaError
+from samba.base import InputError, SambaError
 
 
 class StoreError(InputError):

@@ -38,11 +38,10 @@ from pathlib import Path
 
 import numpy as np
 import scipy
-from samba.db.errors import QueryError, StoreError
 from scipy.spatial import cKDTree
 
-from samba.body.alignment import align_markers
-from samba.body.skeleton import N_MARKERS, markers_of
+from samba.body import N_MARKERS, align_markers, markers_of
+from samba.db.errors import QueryError, StoreError
 
 FORMAT = 2
 DEFAULT_DIMS = 14

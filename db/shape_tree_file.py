@@ -15,14 +15,13 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-from samba.db.errors import StoreError
 
-from samba.base.atomic_file import atomic_path
-from samba.body.body_model import BodyModel
-from samba.cameras.camera import Camera
-from samba.silhouette.runs import SilhouetteRuns
-from samba.silhouette.shape_tree import ShapeTree, TreeLevel
-from samba.silhouette.view import SilhouetteView
+from samba.base import InputError, atomic_path
+from samba.body import BodyModel
+from samba.cameras import Camera
+from samba.db.errors import StoreError
+from samba.db.store import PoseStore
+from samba.silhouette import ShapeTree, SilhouetteRuns, SilhouetteView, TreeLevel
 
 FORMAT = "samba-shape-tree/1"
 TREES_FOLDER = "shape_trees"
@@ -131,3 +130,32 @@ def _tree(header: dict, arrays: dict[str, np.ndarray]) -> ShapeTree:
             raise ValueError(f"level {i}: parents must name one of the {above} nodes above")
         levels.append(TreeLevel(runs, poses, floor_offsets, visibility, parents))
     return ShapeTree(view, body, tuple(levels))
+
+
+def stored_tree(
+    store: str | Path, name: str | None, view: SilhouetteView, body: BodyModel
+) -> ShapeTree:
+    """The store's shape tree `name` (default: CAMERA-BODY) for `view` and `body`; when
+    no name is given and the tree is missing, it is built from the store's poses and
+    saved first (this takes a while; `samba db tree` does it ahead). `InputError` when
+    the saved tree was built for another camera or home."""
+    path = tree_path(store, name or f"{view.camera.name}-{body.name}")
+    if path.exists() or name:
+        tree = read_shape_tree(path)
+        same = (
+            tree.view.size == view.size
+            and np.allclose(tree.view.camera.projection, view.camera.projection)
+            and np.allclose(tree.view.home, view.home, atol=1e-6)
+        )
+        if not same:
+            raise InputError(
+                str(path), "built for another camera or home point: rebuild it (samba db tree)"
+            )
+        return tree
+    print(f"building the shape tree {path.name} once (samba db tree does this ahead)")
+    poses = np.asarray(PoseStore.open(store).poses, dtype=np.float64)
+    if not len(poses):
+        raise InputError(str(store), "the store holds no poses: import takes first")
+    tree = ShapeTree.build(poses, view, body)
+    write_shape_tree(path, tree)
+    return tree

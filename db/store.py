@@ -32,6 +32,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
+
+from samba.body import N_JOINTS, Take, mirror_poses
 from samba.db.catalog import (
     FORMAT,
     SCHEMA,
@@ -42,9 +44,6 @@ from samba.db.catalog import (
 )
 from samba.db.errors import StoreCorruptedError, StoreError
 from samba.db.index import PoseIndex
-
-from samba.body.skeleton import N_JOINTS, mirror_poses
-from samba.body.take import Take
 
 CATALOG = "catalog.sqlite"
 INDEX = "index.npz"

@@ -6,8 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from samba.db.store import PoseStore
-
-from samba.synthetic.motions import library
+from samba.synthetic import library
 
 
 def build_synthetic_store(

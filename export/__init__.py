@@ -1,2 +1,29 @@
-"""Retargeting of the 13-joint skeleton to humanoid avatars, the default avatar, and the
-USD / glTF / BVH writers (`samba export`)."""
+"""Retargeting the 13-joint skeleton onto humanoid avatars (the built-in mannequin, or a
+user's USD / glTF / VRM avatar), live for VMC and offline for takes, and the USD, glTF
+and BVH writers (`samba export`).
+"""
+
+
+from samba.export.avatar_file import read_avatar_rig
+from samba.export.bvh_writer import UNITS, BvhSkeleton, write_bvh_motion
+from samba.export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
+from samba.export.live_retarget import LiveRetarget, retarget_together
+from samba.export.motion import HumanoidMotion
+from samba.export.outputs import load_avatar, write_export
+from samba.export.retargeting import retarget
+
+__all__ = [
+    "BONE_NAMES",
+    "N_BONES",
+    "UNITS",
+    "BvhSkeleton",
+    "HumanoidMotion",
+    "HumanoidRig",
+    "LiveRetarget",
+    "load_avatar",
+    "read_avatar_rig",
+    "retarget",
+    "retarget_together",
+    "write_bvh_motion",
+    "write_export",
+]

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from samba.export.errors import ExportError
 from samba.export.gltf_reader import node_rest_positions, read_gltf
 from samba.export.humanoid import BONE_INDEX, BONE_NAMES, HumanoidRig

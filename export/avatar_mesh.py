@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from samba.export.humanoid import N_BONES
 
 MAX_INFLUENCES = 4

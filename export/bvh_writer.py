@@ -20,12 +20,12 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
+from scipy.spatial.transform import Rotation
+
+from samba.base import write_text_atomic
 from samba.export.errors import ExportError
 from samba.export.humanoid import TIP_BONES, HumanoidRig
 from samba.export.motion import HumanoidMotion
-from scipy.spatial.transform import Rotation
-
-from samba.base.atomic_file import write_text_atomic
 
 UNITS: dict[str, float] = {"m": 1.0, "cm": 100.0}
 """Length units a BVH file can be written in: name -> factor from meters."""

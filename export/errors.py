@@ -1,6 +1,6 @@
 """Errors raised while exporting takes: bad avatars, unknown takes, unwritable outputs."""
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 
 class ExportError(InputError):

@@ -22,8 +22,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from samba.export.errors import ExportError
 from scipy.spatial.transform import Rotation
+
+from samba.export.errors import ExportError
 
 _MAGIC = b"glTF"
 _JSON_CHUNK = 0x4E4F534A

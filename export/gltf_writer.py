@@ -22,12 +22,12 @@ import os
 
 import numpy as np
 import pygltflib as gltf
+
+from samba.base import write_bytes_atomic
 from samba.export.avatar_mesh import AvatarMesh
 from samba.export.errors import ExportError
 from samba.export.humanoid import N_BONES
 from samba.export.motion import HumanoidMotion
-
-from samba.base.atomic_file import write_bytes_atomic
 
 _COMPONENT_TYPES: dict[np.dtype, int] = {
     np.dtype(np.float32): gltf.FLOAT,

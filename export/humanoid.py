@@ -23,7 +23,7 @@ from functools import cached_property
 
 import numpy as np
 
-from samba.body.skeleton import Body
+from samba.body import Body
 
 BONE_NAMES: tuple[str, ...] = (
     "Hips",

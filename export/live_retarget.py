@@ -11,10 +11,16 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from samba.export.humanoid import N_BONES, HumanoidRig
-from samba.export.retarget import LIMBS, leg_length, rest_frames, root_positions, stream_rotations
 
-from samba.body.skeleton import N_JOINTS
+from samba.body import N_JOINTS
+from samba.export.humanoid import N_BONES, HumanoidRig
+from samba.export.retargeting import (
+    LIMBS,
+    leg_length,
+    rest_frames,
+    root_positions,
+    stream_rotations,
+)
 
 
 class LiveRetarget:

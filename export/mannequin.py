@@ -17,6 +17,7 @@ from __future__ import annotations
 import manifold3d
 import numpy as np
 import pymeshlab
+
 from samba.export.avatar_mesh import AvatarMesh
 from samba.export.humanoid import BONE_INDEX, TIP_BONES, HumanoidRig
 from samba.export.skin_weights import skin_weights

@@ -12,15 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from samba.export.humanoid import N_BONES, PARENTS, TIP_BONES, HumanoidRig
 from scipy.spatial.transform import Rotation
 
-from samba.body.kinematics import (
-    continuous_quaternions,
-    resample_times,
-    sample_linear,
-    sample_rotations,
-)
+from samba.body import continuous_quaternions, resample_times, sample_linear, sample_rotations
+from samba.export.humanoid import N_BONES, PARENTS, TIP_BONES, HumanoidRig
 
 
 @dataclass(frozen=True)

@@ -17,9 +17,10 @@ and the largest `MAX_INFLUENCES` kept.
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
+
 from samba.export.avatar_mesh import MAX_INFLUENCES
 from samba.export.humanoid import N_BONES, PARENTS, TIP_BONES, HumanoidRig
-from scipy import sparse
 
 FALLOFF = 2.0
 """Gaussian falloff: a bone weighs exp(-FALLOFF * (q² - q_min²)) at normalised distance q

@@ -5,13 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from samba.db.store import PoseStore
-from samba.export.errors import ExportError
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba.ingest.mcap_take import read_take
 
-from samba.body.skeleton import N_JOINTS
-from samba.body.take import Take
+from samba.body import N_JOINTS, Take
+from samba.db import PoseStore
+from samba.export.errors import ExportError
+from samba.ingest import BvhImportOptions, load_bvh_take, read_take
 
 
 def load_take(ref: str, store: str | None = None) -> Take:

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pxr import Tf, Usd, UsdGeom, UsdSkel, UsdValidation
+
 from samba.export.errors import ExportError
 from samba.export.usd_writer import tf_error_text
 

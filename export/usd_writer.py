@@ -26,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdSkel, Vt
+
+from samba.base import atomic_path
 from samba.export.avatar_mesh import MAX_INFLUENCES, AvatarMesh
 from samba.export.errors import ExportError
 from samba.export.humanoid import HumanoidRig
 from samba.export.motion import HumanoidMotion
-
-from samba.base.atomic_file import atomic_path
 
 SUFFIXES: tuple[str, ...] = (".usda", ".usdc", ".usd")
 """File name suffixes `write_usd` accepts (any letter case): the suffix picks text (.usda)

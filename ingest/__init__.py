@@ -1,18 +1,19 @@
-"""Importers: BVH of any rig (and, later, recorded takes) to 13-joint takes in meters, +Y up.
-
-`read_bvh` / `parse_bvh` (bvh.py) read the format, `load_bvh_take` (bvh_take.py) maps a
-rig (rigs.py) and normalises units and axes (normalize.py), `import_paths` (batch.py)
-fills a pose store.
+"""Importers: BVH of any rig and recorded MCAP takes to 13-joint takes in meters, +Y up
+(rig mapping, unit and up-axis detection, resampling), and batch import into a pose store.
 """
 
-from samba.ingest.batch import FileResult, import_paths
+
+from samba.ingest.batch import FileResult, expand_paths, import_paths
 from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.errors import BvhError, RigError
+from samba.ingest.mcap_take import POSE_TOPIC, TAKE_METADATA, read_take
 from samba.ingest.rigs import BUILTIN_RIGS, RigMap, detect_rig
 
 __all__ = [
     "BUILTIN_RIGS",
+    "POSE_TOPIC",
+    "TAKE_METADATA",
     "BvhError",
     "BvhFile",
     "BvhImportOptions",
@@ -21,8 +22,10 @@ __all__ = [
     "RigError",
     "RigMap",
     "detect_rig",
+    "expand_paths",
     "import_paths",
     "load_bvh_take",
     "parse_bvh",
     "read_bvh",
+    "read_take",
 ]

@@ -6,13 +6,13 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from samba.db.store import PoseStore
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba.ingest.mcap_take import read_take
 from tqdm import tqdm
 
-from samba.base.errors import SambaError
-from samba.body.take import Take
+from samba.base import SambaError
+from samba.body import Take
+from samba.db import PoseStore
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.ingest.mcap_take import read_take
 
 SUFFIXES = (".bvh", ".mcap")
 """Files picked up in named folders: BVH and takes recorded by the live service."""

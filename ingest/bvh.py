@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
-from samba.ingest.errors import BvhError
 
-from samba.body.kinematics import euler_to_quaternions, forward_kinematics
+from samba.body import euler_to_quaternions, forward_kinematics
+from samba.ingest.errors import BvhError
 
 _CHANNELS = {f"{axis}{kind}": (kind, axis) for axis in "XYZ" for kind in ("position", "rotation")}
 _TOKEN = re.compile(r"[{}]|[^\s{}]+")

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from samba.body import Take, forward_kinematics, resample_times, sample_linear, sample_rotations
 from samba.ingest.bvh import parse_bvh
 from samba.ingest.errors import BvhError
 from samba.ingest.normalize import (
@@ -23,14 +25,6 @@ from samba.ingest.normalize import (
     rotation_to_y_up,
 )
 from samba.ingest.rigs import RigMap, map_rig
-
-from samba.body.kinematics import (
-    forward_kinematics,
-    resample_times,
-    sample_linear,
-    sample_rotations,
-)
-from samba.body.take import Take
 
 _CMU_NAME = re.compile(r"(\d+)_(\d+)$")
 _MAX_REACH = 1e9

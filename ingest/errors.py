@@ -1,6 +1,6 @@
 """Errors raised while reading and mapping foreign motion files."""
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 
 class BvhError(InputError):

@@ -16,10 +16,9 @@ import numpy as np
 from mcap.records import Channel, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC
-from samba.ingest.errors import TakeFileError
 
-from samba.body.skeleton import N_JOINTS
-from samba.body.take import Take
+from samba.body import N_JOINTS, Take
+from samba.ingest.errors import TakeFileError
 
 POSE_TOPIC = "/pose_raw"
 """Topic of the reconstructed poses (`samba.PoseRaw` JSON: `joints` 13 x [x, y, z] meters)."""

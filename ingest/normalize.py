@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from samba.body.skeleton import JOINT_INDEX
+from samba.body import JOINT_INDEX
 
 UNITS: dict[str, float] = {
     "m": 1.0,

@@ -19,9 +19,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from samba.body import JOINT_NAMES
 from samba.ingest.errors import RigError
-
-from samba.body.skeleton import JOINT_NAMES
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,14 @@
-"""Samba capture math: the 13-joint skeleton, the 8-marker set, alignment, synthetic motions.
+"""Samba: low-cost real-time motion capture from eight markers, a few cameras and a database
+of real human poses.
 
-This package owns no sockets and no foreign file formats; `db`, `ingest`, `export` and
-`service` build on it.
+The capture math lives in one subpackage per concern (`samba.body`, `samba.reconstruct`,
+`samba.cameras`, `samba.markers`, `samba.silhouette`, `samba.volume`, `samba.synthetic`,
+`samba.evaluation`, on `samba.base`); above it the pose database (`samba.db`), importers
+(`samba.ingest`), avatars and file writers (`samba.export`), the live service
+(`samba.service`) and the `samba` command (`samba.cli`). Each package imports the others
+only through their faces (their `__init__`), in that order of layers.
 """
 
-from samba.base.errors import InputError, SambaError
+from samba.base import InputError, SambaError
 
 __all__ = ["InputError", "SambaError"]

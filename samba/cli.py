@@ -1,54 +1,279 @@
 """The `samba` console command: one entry point, a subcommand per area.
 
-Each area registers its subcommands from its own package; the table below names the
-module that does so, imported only when needed. A `SambaError` (or an operating
-system error such as a full disk) is printed as one line on stderr with exit status 1;
-wrong flags exit with status 2 (argparse).
+`AREAS` says what each `samba X` runs: the function that adds its arguments, which lives
+in the `cli` module of the package that owns the area (`samba.db.cli`, `samba.ingest.cli`,
+`samba.export.cli`, `samba.service.cli.*`); the capture-math areas (`eval`, `calibrate`)
+are parsed here. Every `cli` module only parses arguments and calls its package's API.
+This module is the top layer: it may import every package, and none imports it.
+
+A `SambaError` (or an operating system error such as a full disk) is printed as one
+line on stderr with exit status 1; wrong flags exit with status 2 (argparse).
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
+import json
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
-from samba.base.errors import SambaError
+import numpy as np
+from threadpoolctl import threadpool_limits
 
-AREAS: dict[str, tuple[str, str]] = {
+from samba.base import InputError, SambaError, natural, positive, write_text_atomic
+from samba.cameras import (
+    BOARD_SPEC_HELP,
+    WORLDS,
+    calibrate_recordings,
+    parse_board,
+    write_calibration,
+)
+from samba.db import PoseIndex
+from samba.db import cli as store_cli
+from samba.evaluation import document, evaluate, report_text, sweep_points, write_plots
+from samba.export import cli as export_cli
+from samba.ingest import cli as import_cli
+from samba.ingest import expand_paths, load_bvh_take
+from samba.reconstruct import METHODS, method
+from samba.service import capture_volume_cli, demo, node_cli, serve_cli, track_video_cli
+
+
+def _register_db(parser: argparse.ArgumentParser) -> None:
+    """`samba db ACTION`: the store's actions (`samba.db.cli`) with `import`
+    (`samba.ingest.cli`) second, after `init`."""
+    actions = parser.add_subparsers(dest="db_command", required=True, metavar="ACTION")
+    store_cli.add_create_action(actions)
+    import_cli.add_import_action(actions)
+    store_cli.add_store_actions(actions)
+
+
+def _register_eval(parser: argparse.ArgumentParser) -> None:
+    """`samba eval`: the accuracy protocol over BVH files (`samba.evaluation`)."""
+    parser.add_argument(
+        "--train", nargs="+", required=True, metavar="PATH", help="BVH files and/or folders"
+    )
+    parser.add_argument(
+        "--test",
+        nargs="+",
+        required=True,
+        metavar="PATH",
+        help="BVH files and/or folders; a test take also given in --train is left out of "
+        "its own database (so --train D --test D is leave-one-take-out over D)",
+    )
+    parser.add_argument(
+        "--methods",
+        type=_method_list,
+        default=list(METHODS),
+        metavar="NAME,...",
+        help=f"methods to compare (default {','.join(METHODS)})",
+    )
+    parser.add_argument("--K", type=positive, help="neighbours K for every method but nn")
+    parser.add_argument("--N", type=positive, help="pseudo-poses N for every method but nn")
+    parser.add_argument(
+        "--dropout",
+        type=_fraction,
+        default=0.0,
+        help="fraction of marker observations missing at random from frame 2 on (e.g. 0.1)",
+    )
+    parser.add_argument(
+        "--new-user",
+        action="store_true",
+        help="scale the test bodies' limbs by random factors in [0.9, 1.1]",
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="capture seed; test take i uses seed + i"
+    )
+    parser.add_argument("--json", metavar="OUT", help="write settings and summaries as JSON")
+    parser.add_argument("--plots", metavar="DIR", help="write PNG plots into this folder")
+    parser.add_argument(
+        "--sweep-k",
+        type=_int_list,
+        default=[],
+        metavar="K,...",
+        help="also run samba with these K (the paper's Fig. 8), e.g. 1,2,5,10,20,30,50",
+    )
+    parser.add_argument(
+        "--sweep-n",
+        type=_int_list,
+        default=[],
+        metavar="N,...",
+        help="also run samba with these N for K = 10, 20, 30 (Fig. 9), e.g. 1,2,5,10,20",
+    )
+    parser.add_argument(
+        "--max-frames",
+        type=positive,
+        metavar="F",
+        help="evaluate only the first F frames of each test take",
+    )
+    parser.set_defaults(run=_eval)
+
+
+def _int_list(text: str) -> list[int]:
+    return [positive(part) for part in text.split(",") if part.strip()]
+
+
+def _method_list(text: str) -> list[str]:
+    names = [part.strip() for part in text.split(",") if part.strip()]
+    for name in names:
+        if name not in METHODS:
+            raise argparse.ArgumentTypeError(
+                f"unknown method {name!r}; known: {', '.join(METHODS)}"
+            )
+    if not names:
+        raise argparse.ArgumentTypeError("no method given")
+    return list(dict.fromkeys(names))
+
+
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1), got {value}")
+    return value
+
+
+def _bvh_files(paths: Sequence[str], flag: str) -> list[Path]:
+    """The BVH files under paths (folders searched), resolved, each once."""
+    files = list(dict.fromkeys(p.resolve() for p in expand_paths(paths)))
+    if not files:
+        raise InputError(f"{flag} {' '.join(paths)}", "no .bvh files found")
+    return files
+
+
+def _eval(args: argparse.Namespace) -> int:
+    if args.plots:
+        if Path(args.plots).exists() and not Path(args.plots).is_dir():
+            raise InputError("--plots", f"{args.plots} is a file; plots go into a folder")
+        Path(args.plots).mkdir(parents=True, exist_ok=True)
+    if args.json and not Path(args.json).resolve().parent.is_dir():
+        raise InputError("--json", f"folder of {args.json} does not exist")
+    train = _bvh_files(args.train, "--train")
+    test = _bvh_files(args.test, "--test")
+    files = list(dict.fromkeys(train + test))
+    stems = [f.stem for f in files]  # a take is named by its file stem, or its path if not unique
+    takes = {
+        f: (f.stem if stems.count(f.stem) == 1 else str(f), load_bvh_take(f).poses) for f in files
+    }
+    train_takes = [takes[f] for f in train]
+    test_takes = [(name, poses[: args.max_frames]) for name, poses in (takes[f] for f in test)]
+    runs = {name: method(name).with_sizes(args.K, args.N) for name in args.methods}
+    sweeps = sweep_points(runs, args.sweep_k, args.sweep_n, args.N)
+    with threadpool_limits(limits=1):  # the protocol times single-threaded reconstruction
+        evaluation = evaluate(
+            train_takes,
+            test_takes,
+            runs,
+            PoseIndex.build,
+            args.seed,
+            args.dropout,
+            args.new_user,
+            progress=None,
+        )
+    print(report_text(evaluation, args.methods, sweeps))
+    if args.json:
+        doc = document(evaluation, runs, args.methods, sweeps, args.max_frames)
+        write_text_atomic(args.json, json.dumps(doc, indent=1) + "\n")
+        print(f"wrote {args.json}")
+    if args.plots:
+        written = write_plots(Path(args.plots), evaluation, args.methods, sweeps)
+        print(f"wrote {len(written)} plots to {args.plots}")
+    return 0
+
+
+def _register_calibrate(parser: argparse.ArgumentParser) -> None:
+    """`samba calibrate`: cameras from their recordings of a board (`samba.cameras`)."""
+    parser.add_argument(
+        "sources",
+        nargs="+",
+        metavar="IMAGES_OR_VIDEO",
+        help="one per camera: a folder of images (frames in file-name order) or a video file",
+    )
+    parser.add_argument("--board", required=True, metavar="SPEC", help=BOARD_SPEC_HELP)
+    parser.add_argument(
+        "-o", "--output", required=True, metavar="CALIB.toml", help="calibration file to write"
+    )
+    parser.add_argument(
+        "--world",
+        choices=WORLDS,
+        default="board",
+        help="board: the board lies face up on the floor in --floor-frame, which becomes "
+        "y = 0 with the origin at its first corner; camera0: the first camera at the "
+        "origin looking along -Z (default board)",
+    )
+    parser.add_argument(
+        "--floor-frame",
+        type=natural,
+        metavar="N",
+        help="frame in which the board lies on the floor (default: the first frame in "
+        "which any camera sees the board)",
+    )
+    parser.add_argument(
+        "--every",
+        type=positive,
+        default=1,
+        metavar="N",
+        help="use every N-th frame only (frame numbers keep counting all frames)",
+    )
+    parser.add_argument(
+        "--refine-intrinsics",
+        action="store_true",
+        help="also refine focal lengths, principal points and distortion in the joint "
+        "adjustment (slower; helps when each camera saw the board in few images)",
+    )
+    parser.set_defaults(run=_calibrate)
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    board = parse_board(args.board)
+    output = Path(args.output)
+    if not output.resolve().parent.is_dir():
+        raise InputError("--output", f"folder of {output} does not exist")
+    calibration = calibrate_recordings(
+        args.sources,
+        board,
+        world=args.world,
+        floor_frame=args.floor_frame,
+        every=args.every,
+        refine_intrinsics=args.refine_intrinsics,
+    )
+    print(calibration.report())
+    result = calibration.result
+    write_calibration(output, result.cameras, error_px=float(np.mean(result.rms_px)))
+    print(f"wrote {output}")
+    return 0
+
+
+AREAS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], str]] = {
     "db": (
-        "samba.ingest.cli",
+        _register_db,
         "pose database: init, import, ls, show, label, rm, verify, stats, tree, query",
     ),
-    "eval": (
-        "samba.evaluation.experiment",
-        "accuracy and speed of every reconstruction method on BVH takes",
-    ),
-    "calibrate": ("samba.cameras.recordings", "calibrate cameras from images or videos of a board"),
+    "eval": (_register_eval, "accuracy and speed of every reconstruction method on BVH takes"),
+    "calibrate": (_register_calibrate, "calibrate cameras from images or videos of a board"),
     "export": (
-        "samba.export.cli",
+        export_cli.register,
         "retarget takes to a humanoid avatar and write USD, glTF or BVH",
     ),
-    "serve": ("samba.service.serve_cli", "live capture server: packets in; VMC, viewer, takes out"),
-    "demo": (
-        "samba.service.demo",
-        "a live capture end to end: server, two camera nodes, take, export",
-    ),
+    "serve": (serve_cli.register, "live capture server: packets in; VMC, viewer, takes out"),
+    "demo": (demo.register, "a live capture end to end: server, two camera nodes, take, export"),
     "node": (
-        "samba.service.node_cli",
+        node_cli.register,
         "camera node: track the 8 markers (or, markerless, the body) in frames, send them by UDP",
     ),
     "track-video": (
-        "samba.service.track_video_cli",
+        track_video_cli.register,
         "markerless capture from one camera: silhouettes tracked over the shape tree, as a take",
     ),
     "capture-volume": (
-        "samba.service.capture_volume_cli",
+        capture_volume_cli.register,
         "model-free capture from several cameras: visual hull, derived skeleton, BVH",
     ),
 }
-"""Subcommand -> (module with `register(parser)`, one-line help)."""
+"""Subcommand -> (the function that adds its arguments, one-line help)."""
 
 
 class _CommandParser(argparse.ArgumentParser):
@@ -75,9 +300,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(
         dest="area", required=True, metavar="COMMAND", parser_class=_CommandParser
     )
-    for name, (module, help_text) in AREAS.items():
-        area = sub.add_parser(name, help=help_text, description=help_text)
-        importlib.import_module(module).register(area)
+    for name, (register, help_text) in AREAS.items():
+        register(sub.add_parser(name, help=help_text, description=help_text))
     return parser
 
 

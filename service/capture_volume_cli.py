@@ -20,22 +20,23 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
-from samba.export.bvh_writer import UNITS, BvhSkeleton, write_bvh_motion
-from samba.service.track_video_cli import sized_frames
 
-from samba.base.arguments import finite_float, natural, positive, positive_float
-from samba.base.atomic_file import atomic_path
-from samba.base.errors import InputError
-from samba.body.skeleton import JOINT_NAMES
-from samba.cameras.calibration_file import read_calibration
-from samba.cameras.camera import CameraGroup
-from samba.cameras.frame_source import open_frames
-from samba.silhouette.extraction import BACKGROUND_METHODS, SilhouetteExtractor
-from samba.volume.capture import MIN_VOXELS, KinematicMotion, VolumeCapture, capture_volumes
-from samba.volume.frame_kinematics import HUMAN_END_BRANCHES
-from samba.volume.humanoid import humanoid_joints
-from samba.volume.visual_hull import VisualHull
-from samba.volume.voxel_grid import VoxelGrid
+from samba.base import InputError, atomic_path, finite_float, natural, positive, positive_float
+from samba.body import JOINT_NAMES
+from samba.cameras import CameraGroup, open_frames, read_calibration
+from samba.export import UNITS, BvhSkeleton, write_bvh_motion
+from samba.service.track_video_cli import sized_frames
+from samba.silhouette import BACKGROUND_METHODS, SilhouetteExtractor
+from samba.volume import (
+    HUMAN_END_BRANCHES,
+    MIN_VOXELS,
+    KinematicMotion,
+    VisualHull,
+    VolumeCapture,
+    VoxelGrid,
+    capture_volumes,
+    humanoid_joints,
+)
 
 DEFAULT_BOUNDS = (-1.0, 0.0, -1.0, 1.0, 2.1, 1.0)
 """Capture volume (x0, y0, z0, x1, y1, z1) m: 2 x 2 m of floor, 2.1 m high."""

@@ -31,11 +31,11 @@ from pathlib import Path
 from typing import Any
 
 from aiohttp import web
+
+from samba.base import SambaError
 from samba.service.errors import ServiceError
 from samba.service.server import CaptureServer
 from samba.service.session_config import SessionConfig
-
-from samba.base.errors import SambaError
 
 SERVER_KEY = web.AppKey("capture_server", CaptureServer)
 STARTED_KEY = web.AppKey("started", float)

@@ -25,22 +25,19 @@ import webbrowser
 from pathlib import Path
 
 import numpy as np
-from samba.db.store import PoseStore
-from samba.db.synthetic_store import build_synthetic_store
-from samba.export.cli import load_avatar, write
-from samba.export.retarget import retarget
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba.ingest.mcap_take import read_take
+
+from samba.base import address, positive_float
+from samba.cameras import write_calibration
+from samba.db import PoseStore, build_synthetic_store
+from samba.export import load_avatar, retarget, write_export
+from samba.ingest import BvhImportOptions, load_bvh_take, read_take
 from samba.service.serve import LiveServer
 from samba.service.session import CaptureSession
 from samba.service.session_config import SessionConfig
 from samba.service.synthetic_capture import SyntheticCapture, play
 from samba.service.udp_input import UdpInput
 from samba.service.vmc import MARIONETTE_PORT
-
-from samba.base.arguments import address, positive_float
-from samba.cameras.calibration_file import write_calibration
-from samba.synthetic.motions import MOTIONS
+from samba.synthetic import MOTIONS
 
 SESSION = "demo"
 DRAIN_S = 10.0
@@ -195,7 +192,7 @@ def _report(
     outputs = [folder / "exports" / f"{take_path.stem}.{s}" for s in ("usda", "glb")]
     outputs[0].parent.mkdir(exist_ok=True)
     for out, fmt in zip(outputs, ("usd", "glb"), strict=True):
-        write(fmt, out, motion, avatar.mesh, "m")
+        write_export(fmt, out, motion, avatar.mesh, "m")
     print(f"4. files: take {take_path} ({take_path.stat().st_size / 1e3:.0f} kB)")
     for out in outputs:
         print(f"   export {out} ({out.stat().st_size / 1e3:.0f} kB, {len(motion)} frames)")

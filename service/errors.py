@@ -1,6 +1,6 @@
 """Errors raised by the live capture service on bad input, such as an unreadable take file."""
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 
 class ServiceError(InputError):

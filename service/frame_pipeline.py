@@ -23,24 +23,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from samba.export.avatar_file import read_avatar_rig
-from samba.export.humanoid import HumanoidRig
-from samba.export.live_retarget import LiveRetarget, retarget_together
+
+from samba.body import N_MARKERS
+from samba.cameras import Triangulation, read_calibration
+from samba.export import HumanoidRig, LiveRetarget, read_avatar_rig, retarget_together
+from samba.markers import CrossViewSettings, StageTracker
+from samba.reconstruct import PoseEstimate, ReconstructionConfig, method, reconstruct_together
 from samba.service.session_config import SessionConfig
 from samba.service.session_indexes import SessionIndexes
 from samba.service.vmc import VmcSender, frame_bundles, unity_values
-
-from samba.body.skeleton import N_MARKERS
-from samba.cameras.calibration_file import read_calibration
-from samba.cameras.triangulation import Triangulation
-from samba.markers.cross_view_labels import CrossViewSettings
-from samba.markers.stage_tracking import StageTracker
-from samba.reconstruct.methods import method
-from samba.reconstruct.reconstruction import (
-    PoseEstimate,
-    ReconstructionConfig,
-    reconstruct_together,
-)
 
 PREPARED_MISSING = 2
 """A session prepares the pose index for up to this many missing markers when it opens

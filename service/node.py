@@ -38,18 +38,23 @@ from typing import Literal, Protocol, TextIO
 
 import cv2
 import numpy as np
-from samba.service.packet import MAX_BLOBS, MarkerPacket, PosePacket, encode
 
-from samba.base.errors import InputError
-from samba.body.skeleton import N_JOINTS, N_MARKERS
-from samba.cameras.camera import Camera
-from samba.cameras.frame_source import FrameSource, open_video
-from samba.markers.camera_chain import EMPTY_STAGE_FRAMES
-from samba.markers.detection import detect_markers, static_mask
-from samba.markers.lead_in import LeadIn, standing_lead_in
-from samba.markers.render import RenderOptions, film_empty_stage, render_camera
-from samba.markers.tracking import MarkerTracker
-from samba.synthetic.motions import generate
+from samba.base import InputError
+from samba.body import N_JOINTS, N_MARKERS
+from samba.cameras import Camera, FrameSource, open_video
+from samba.markers import (
+    EMPTY_STAGE_FRAMES,
+    LeadIn,
+    MarkerTracker,
+    RenderOptions,
+    detect_markers,
+    film_empty_stage,
+    render_camera,
+    standing_lead_in,
+    static_mask,
+)
+from samba.service.packet import MAX_BLOBS, MarkerPacket, PosePacket, encode
+from samba.synthetic import generate
 
 DEFAULT_PORT = 9870
 """The UDP port the server (`samba serve`) listens on for camera packets by default."""

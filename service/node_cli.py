@@ -21,7 +21,12 @@ import time
 from collections.abc import Iterator
 
 import numpy as np
-from samba.db.cli import chosen_body, chosen_home, tree_for
+
+from samba.base import InputError, address, finite_float, natural, positive_float
+from samba.body import KINDS, N_MARKERS
+from samba.cameras import Camera, open_frames, read_calibration
+from samba.db import stored_tree
+from samba.db.cli import chosen_body, chosen_home
 from samba.service.node import (
     DEFAULT_FPS,
     DEFAULT_PORT,
@@ -37,17 +42,8 @@ from samba.service.node import (
 )
 from samba.service.packet import MIN_KEY_BYTES, MarkerPacket, read_key_file
 from samba.service.silhouette_node import SilhouetteNode, SyntheticStageFeed
-
-from samba.base.arguments import address, finite_float, natural, positive_float
-from samba.base.errors import InputError
-from samba.body.body_model import KINDS
-from samba.body.skeleton import N_MARKERS
-from samba.cameras.calibration_file import read_calibration
-from samba.cameras.camera import Camera
-from samba.cameras.frame_source import open_frames
-from samba.silhouette.extraction import SilhouetteExtractor
-from samba.silhouette.view import SilhouetteView
-from samba.synthetic.motions import MOTIONS
+from samba.silhouette import SilhouetteExtractor, SilhouetteView
+from samba.synthetic import MOTIONS
 
 START_DELAY_SECONDS = 0.5
 """How far ahead of now the synthetic capture starts when `--start-at` is not given."""
@@ -315,7 +311,7 @@ def _open_silhouette_source(
 ) -> tuple[SilhouetteNode, Iterator[Capture]]:
     """The markerless node and the capture feed of the chosen source, opened."""
     view, body = SilhouetteView(camera, chosen_home(args)), chosen_body(args)
-    tree = tree_for(args.db, args.tree, view, body)
+    tree = stored_tree(args.db, args.tree, view, body)
     pace, loop = not args.no_pace, bool(args.loop)
     if source == "synthetic":
         fps = args.fps or DEFAULT_FPS

@@ -70,9 +70,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from samba.service.errors import PacketError, ServiceError
 
-from samba.body.skeleton import N_JOINTS, N_MARKERS
+from samba.body import N_JOINTS, N_MARKERS
+from samba.service.errors import PacketError, ServiceError
 
 MAGIC = b"SMBA"
 VERSION = 1

@@ -38,6 +38,9 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any, Generic, TypeVar
 
+from threadpoolctl import threadpool_limits
+
+from samba.base import InputError
 from samba.service.errors import ServiceError
 from samba.service.frame_pipeline import (
     FrameInput,
@@ -49,9 +52,6 @@ from samba.service.frame_pipeline import (
 )
 from samba.service.session_config import SessionConfig
 from samba.service.session_indexes import SessionIndexes
-from threadpoolctl import threadpool_limits
-
-from samba.base.errors import InputError
 
 LOG = logging.getLogger(__name__)
 

@@ -22,6 +22,8 @@ from pathlib import Path
 from types import TracebackType
 
 from aiohttp import web
+
+from samba.cameras import read_calibration
 from samba.service.control_api import add_control_routes, token_middleware
 from samba.service.errors import ServiceError
 from samba.service.pipeline_workers import FrameDone, WorkerPipelines
@@ -29,8 +31,6 @@ from samba.service.server import CaptureServer
 from samba.service.session_config import SessionConfig
 from samba.service.udp_input import UdpInput
 from samba.service.viewer import ViewerHub, add_viewer_routes
-
-from samba.cameras.calibration_file import read_calibration
 
 UDP_PORT = 9870
 """Default UDP port camera nodes send to."""

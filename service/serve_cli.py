@@ -10,14 +10,14 @@ import signal
 import sys
 from pathlib import Path
 
+from threadpoolctl import threadpool_limits
+
+from samba.base import address, bind_address, natural, positive_float
+from samba.reconstruct import METHODS
 from samba.service.packet import read_key_file
 from samba.service.serve import CORES, HTTP_PORT, UDP_PORT, LiveServer, auto_workers
 from samba.service.session import CaptureSession
 from samba.service.session_config import INPUTS, LABELLERS, SessionConfig, read_sessions
-from threadpoolctl import threadpool_limits
-
-from samba.base.arguments import address, bind_address, natural, positive_float
-from samba.reconstruct.methods import METHODS
 
 
 def register(parser: argparse.ArgumentParser) -> None:

@@ -27,6 +27,9 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+
+from samba.body import N_MARKERS
+from samba.cameras import read_calibration
 from samba.service.errors import ServiceError
 from samba.service.frame_pipeline import CameraMarkers, FrameInput, FrameOutput
 from samba.service.frame_sync import FrameSync, SyncedFrame
@@ -35,9 +38,6 @@ from samba.service.packet import Packet, PosePacket
 from samba.service.session_config import SessionConfig
 from samba.service.take_recorder import TakeRecorder
 from samba.service.viewer import ViewerHub, frame_message
-
-from samba.body.skeleton import N_MARKERS
-from samba.cameras.calibration_file import read_calibration
 
 LOG = logging.getLogger(__name__)
 

@@ -47,10 +47,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from samba.base import address
+from samba.reconstruct import METHODS
 from samba.service.errors import ServiceError
-
-from samba.base.arguments import address
-from samba.reconstruct.methods import METHODS
 
 SESSION_NAME = re.compile(r"[A-Za-z0-9._-]{1,16}")
 """A session's name: what camera nodes put in their packets' session field."""

@@ -16,10 +16,9 @@ import weakref
 from pathlib import Path
 
 import numpy as np
-from samba.db.index import PoseIndex
-from samba.db.store import PoseStore
 
-from samba.body.skeleton import mirror_poses
+from samba.body import mirror_poses
+from samba.db import PoseIndex, PoseStore
 
 
 class SessionIndexes:

@@ -17,17 +17,20 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import numpy as np
-from samba.service.node import Capture, grid_captures
 
-from samba.body.body_model import BodyModel
-from samba.cameras.camera import Camera
-from samba.silhouette.distance import downsampled
-from samba.silhouette.evaluation import staged
-from samba.silhouette.extraction import SilhouetteExtractor
-from samba.silhouette.person_render import person_frames, stage_background
-from samba.silhouette.shape_tree import ShapeTree
-from samba.silhouette.tracker import SilhouetteTracker
-from samba.synthetic.motions import generate
+from samba.body import BodyModel
+from samba.cameras import Camera
+from samba.service.node import Capture, grid_captures
+from samba.silhouette import (
+    ShapeTree,
+    SilhouetteExtractor,
+    SilhouetteTracker,
+    downsampled,
+    person_frames,
+    stage_background,
+    staged,
+)
+from samba.synthetic import generate
 
 
 class SilhouetteNode:

@@ -19,13 +19,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from samba.service.packet import MarkerPacket, encode
 
-from samba.body.skeleton import markers_of
-from samba.body.take import Take
-from samba.cameras.camera import CameraGroup
-from samba.markers.observation import spread_cameras
-from samba.synthetic.motions import generate
+from samba.body import Take, markers_of
+from samba.cameras import CameraGroup
+from samba.markers import spread_cameras
+from samba.service.packet import MarkerPacket, encode
+from samba.synthetic import generate
 
 
 @dataclass(frozen=True, eq=False)

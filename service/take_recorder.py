@@ -31,13 +31,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from mcap.writer import Writer
-from samba.ingest.mcap_take import POSE_TOPIC, TAKE_METADATA
+
+from samba.body import BONES, JOINT_NAMES, N_JOINTS, N_MARKERS, TORSO_EDGES
+from samba.ingest import POSE_TOPIC, TAKE_METADATA
 from samba.service.errors import ServiceError
 
-from samba.body.skeleton import BONES, JOINT_NAMES, N_JOINTS, N_MARKERS, TORSO_EDGES
-
 if TYPE_CHECKING:
-    from samba.reconstruct.reconstruction import PoseEstimate
+    from samba.reconstruct import PoseEstimate
 
 
 FRAME_ID = "mocap"

@@ -18,25 +18,21 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
-from samba.db.cli import (
-    add_camera_arguments,
-    chosen_body,
-    chosen_camera,
-    chosen_home,
-    tree_for,
-)
-from samba.service.take_recorder import TakeRecorder
 
-from samba.base.arguments import natural, positive_float
-from samba.base.errors import InputError
-from samba.body.skeleton import N_MARKERS
-from samba.cameras.camera import Camera
-from samba.cameras.frame_source import open_frames
-from samba.reconstruct.reconstruction import PoseEstimate
-from samba.silhouette.distance import downsampled
-from samba.silhouette.extraction import BACKGROUND_METHODS, SilhouetteExtractor
-from samba.silhouette.tracker import SilhouetteTracker
-from samba.silhouette.view import SilhouetteView
+from samba.base import InputError, natural, positive_float
+from samba.body import N_MARKERS
+from samba.cameras import Camera, open_frames
+from samba.db import stored_tree
+from samba.db.cli import add_camera_arguments, chosen_body, chosen_camera, chosen_home
+from samba.reconstruct import PoseEstimate
+from samba.service.take_recorder import TakeRecorder
+from samba.silhouette import (
+    BACKGROUND_METHODS,
+    SilhouetteExtractor,
+    SilhouetteTracker,
+    SilhouetteView,
+    downsampled,
+)
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -82,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     except InputError as exc:
         stage = args.background or f"{args.video} (--empty-frames)"
         raise InputError(stage, exc.problem) from None
-    tree = tree_for(args.db, args.tree, view, chosen_body(args))
+    tree = stored_tree(args.db, args.tree, view, chosen_body(args))
     tracker = SilhouetteTracker(tree, height=args.height)
     try:
         seconds, held = _track(frames, extractor, tracker, out, args)

@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 from aiohttp import WSCloseCode, web
-from samba.service.take_recorder import SKELETON_LINES
 
-from samba.body.skeleton import JOINT_NAMES, MARKER_JOINTS, MARKER_NAMES, N_JOINTS, N_MARKERS
+from samba.body import JOINT_NAMES, MARKER_JOINTS, MARKER_NAMES, N_JOINTS, N_MARKERS
+from samba.service.take_recorder import SKELETON_LINES
 
 VIEWER_PAGE: Path = Path(__file__).with_name("viewer_page") / "index.html"
 """The viewer's single HTML file (shipped as package data of `service`)."""

@@ -22,8 +22,8 @@ from collections.abc import Iterable
 import numpy as np
 from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
-from samba.export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
-from samba.export.motion import HumanoidMotion
+
+from samba.export import BONE_NAMES, N_BONES, HumanoidMotion, HumanoidRig
 from samba.service.errors import ServiceError
 
 MARIONETTE_PORT = 39539

@@ -8,11 +8,11 @@ import os
 from pathlib import Path
 
 import pytest
-from samba.db.synthetic_store import build_synthetic_store
-from samba.service.synthetic_capture import SyntheticCapture
 from silhouette_fixtures import SmallBuild, build_small_tree
 
 from samba.cameras.calibration_file import write_calibration
+from samba.db.synthetic_store import build_synthetic_store
+from samba.service.synthetic_capture import SyntheticCapture
 from samba.silhouette.shape_tree import ShapeTree
 
 ROOT = Path(__file__).resolve().parents[1]

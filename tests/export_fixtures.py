@@ -5,13 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
+from samba.body.take import Take
 from samba.export.avatar_mesh import AvatarMesh
 from samba.export.humanoid import N_BONES, TIP_BONES, HumanoidRig
 from samba.export.motion import HumanoidMotion
-from samba.export.retarget import retarget
+from samba.export.retargeting import retarget
 from samba.ingest.bvh_take import load_bvh_take
-
-from samba.body.take import Take
 from samba.synthetic import motions as synthetic
 
 RIG_FAMILIES = ("cgspeed", "daz", "iclone")

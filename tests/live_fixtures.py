@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 from pythonosc.osc_bundle import OscBundle
-from samba.db.store import PoseStore
-from samba.service.session_config import SessionConfig
-from samba.service.synthetic_capture import SyntheticCapture
 
 from samba.cameras.triangulation import Triangulation
+from samba.db.store import PoseStore
 from samba.reconstruct.methods import method
+from samba.service.session_config import SessionConfig
+from samba.service.synthetic_capture import SyntheticCapture
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -19,11 +19,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from samba.db.store import INDEX, PoseStore
 
 from samba.body.perturb import perturb_joint_angles
 from samba.body.skeleton import Body
 from samba.body.take import Take
+from samba.db.store import INDEX, PoseStore
 
 PLAN_LENGTH = 3000
 DIE_POINTS = ("append", "compact", "index", "save")

@@ -11,16 +11,16 @@ import numpy as np
 import pytest
 from glb_edit import with_json, write_gltf
 from pxr import Usd, UsdGeom, UsdSkel, Vt
+
+from samba.body.skeleton import Body
 from samba.export import usd_writer
 from samba.export.avatar_file import USD_SUFFIXES, read_avatar_rig
 from samba.export.errors import ExportError
 from samba.export.gltf_writer import write_glb
 from samba.export.humanoid import BONE_INDEX, BONE_NAMES, N_BONES, HumanoidRig
 from samba.export.motion import HumanoidMotion
-from samba.export.retarget import bone_direction_errors, retarget
+from samba.export.retargeting import bone_direction_errors, retarget
 from samba.export.usd_writer import joint_tokens, write_usd
-
-from samba.body.skeleton import Body
 from samba.synthetic.motions import generate
 
 AVATAR_RIG = HumanoidRig.from_body(Body.from_height(1.58).scaled({"thigh": 1.08}), 35.0)

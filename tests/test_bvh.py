@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bvh_fixtures import HumanoidFixture, make_humanoid
+
+from samba.base.errors import InputError, SambaError
 from samba.ingest.bvh import BvhFile, parse_bvh, read_bvh
 from samba.ingest.bvh_take import load_bvh_take
 from samba.ingest.errors import BvhError
-
-from samba.base.errors import InputError, SambaError
 
 SOURCE = "walk.bvh"
 

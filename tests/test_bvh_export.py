@@ -12,16 +12,16 @@ import bvhio
 import numpy as np
 import pytest
 from export_fixtures import real_takes, synthetic_motion
+from scipy.spatial.transform import Rotation
+
+from samba.body.take import Take
 from samba.export.bvh_writer import UNITS, BvhSkeleton, euler_zxy, write_bvh, write_bvh_motion
 from samba.export.errors import ExportError
 from samba.export.humanoid import CAPTURE_JOINT, N_BONES, TIP_BONES, HumanoidRig
 from samba.export.motion import HumanoidMotion
-from samba.export.retarget import bone_direction_errors, retarget
+from samba.export.retargeting import bone_direction_errors, retarget
 from samba.ingest.bvh import read_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
-from scipy.spatial.transform import Rotation
-
-from samba.body.take import Take
 
 SYNTHETIC = ("walk", "kick", "turn", "jumping_jacks")
 UNIT = pytest.mark.parametrize("unit", list(UNITS))

@@ -16,10 +16,10 @@ import pytest
 from bvh_fixtures import make_humanoid
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from samba.ingest.bvh import BvhFile, parse_bvh
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 
 from samba.base.errors import SambaError
+from samba.ingest.bvh import BvhFile, parse_bvh
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 
 pytestmark = pytest.mark.filterwarnings("error")  # a warning is output the user sees, too
 

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 
 from samba.body.skeleton import markers_of
 from samba.cameras.synthetic_cameras import with_size
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.markers.camera_chain import ChainResult, run_chain
 from samba.markers.lead_in import standing_lead_in
 from samba.markers.observation import evaluation_cameras, marker_coverage, spread_cameras

@@ -12,12 +12,12 @@ import cv2
 import numpy as np
 import pytest
 from markerless_fixtures import SENSOR_NOISE, write_image_folder
-from samba.ingest.bvh import read_bvh
 from test_track_video import _assert_one_line_error, samba
 
 from samba.body.body_model import BodyModel, scaled_to
 from samba.cameras.calibration_file import write_calibration
 from samba.cameras.camera import Camera
+from samba.ingest.bvh import read_bvh
 from samba.silhouette.person_render import person_frames, stage_background
 from samba.synthetic.motions import generate
 from samba.volume.visual_hull import volume_cameras

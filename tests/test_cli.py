@@ -10,12 +10,12 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from samba.cli import main
 from samba.db.store import PoseStore
 from samba.export.gltf_reader import read_glb_joint_positions
 from samba.export.usd_reader import read_usd_joint_positions
 from samba.ingest.mcap_take import read_take
-
-from samba.cli import main
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba.ingest.normalize import foot_contacts, leading_tpose_frames
 
 from samba.body.skeleton import bone_lengths
 from samba.body.take import Take
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.ingest.normalize import foot_contacts, leading_tpose_frames
 
 EXPECTED_RIGS = {"cgspeed": "cmu-max", "iclone": "iclone", "daz": "daz"}
 

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 
 from samba.base.errors import InputError
 from samba.body.skeleton import markers_of, standing_pose
 from samba.cameras.camera import Camera, CameraGroup
 from samba.cameras.synthetic_cameras import with_size
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.markers.camera_chain import ChainSettings, run_chain
 from samba.markers.cross_view_labels import FRESH_FRAMES, CrossViewLabeller, Reacquisition
 from samba.markers.observation import spread_cameras

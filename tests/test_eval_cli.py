@@ -11,6 +11,7 @@ import pytest
 
 from samba.base.errors import InputError
 from samba.cli import main
+from samba.db.index import PoseIndex
 from samba.evaluation.experiment import evaluate, sweep_points
 from samba.reconstruct.methods import METHODS, method
 from samba.synthetic.motions import generate
@@ -144,33 +145,37 @@ def synthetic(seed: int) -> tuple[str, np.ndarray]:
 def test_evaluate_in_memory_leaves_each_test_take_out() -> None:
     takes = [synthetic(1), synthetic(2)]
     runs = {name: method(name) for name in METHODS}
-    loto = evaluate(takes, takes, runs, seed=3)
+    loto = evaluate(takes, takes, runs, PoseIndex.build, seed=3)
     assert loto.left_out == ("walk1", "walk2")
     assert loto.mode.startswith("leave-one-take-out")
-    summaries = loto.summaries()
+    summaries = loto.summaries
     assert set(summaries) == set(METHODS)
     for label, summary in summaries.items():
         assert summary["frames"] == 180, label
         assert 0 < summary["mpjpe_cm"] < 30, label
         assert set(summary["per_take_cm"]) == {"walk1", "walk2"}
     # with the test take itself in the database (under another name) nn finds its poses
-    seen = evaluate([takes[1], ("copy", takes[0][1])], takes, {"nn": method("nn")}, seed=3)
+    seen = evaluate(
+        [takes[1], ("copy", takes[0][1])], takes, {"nn": method("nn")}, PoseIndex.build, seed=3
+    )
     assert seen.left_out == ("walk2",) and seen.mode.startswith("mixed")
     assert (
-        seen.summaries()["nn"]["per_take_cm"]["walk1"]
+        seen.summaries["nn"]["per_take_cm"]["walk1"]
         < 0.5 * summaries["nn"]["per_take_cm"]["walk1"]
     )
     # the capture depends only on the seed: the same run gives the same errors
-    again = evaluate(takes, takes, {"chai": method("chai")}, seed=3)
+    again = evaluate(takes, takes, {"chai": method("chai")}, PoseIndex.build, seed=3)
     np.testing.assert_array_equal(again.results["chai"][1].errors, loto.results["chai"][1].errors)
 
 
 def test_evaluate_rejects_a_database_too_small() -> None:
     take = synthetic(1)
     with pytest.raises(InputError, match="no training take"):
-        evaluate([take], [take], {"nn": method("nn")})
+        evaluate([take], [take], {"nn": method("nn")}, PoseIndex.build)
     with pytest.raises(InputError, match="K = 200"):
-        evaluate([synthetic(2)], [take], {"samba": method("samba").with_sizes(k=200)})
+        evaluate(
+            [synthetic(2)], [take], {"samba": method("samba").with_sizes(k=200)}, PoseIndex.build
+        )
 
 
 def test_sweep_points_reuse_equal_runs() -> None:

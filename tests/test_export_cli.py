@@ -8,19 +8,19 @@ import numpy as np
 import pytest
 from glb_edit import write_gltf
 from pxr import Usd, UsdGeom
+
+from samba.body.skeleton import Body
+from samba.cli import main
 from samba.db.store import PoseStore
 from samba.export.bvh_writer import write_bvh
 from samba.export.gltf_reader import read_glb_joint_positions
 from samba.export.gltf_writer import write_glb
 from samba.export.humanoid import BONE_NAMES, HumanoidRig
 from samba.export.motion import HumanoidMotion
-from samba.export.retarget import bone_direction_errors, retarget
+from samba.export.retargeting import bone_direction_errors, retarget
 from samba.export.usd_reader import read_usd_joint_positions
 from samba.export.usd_writer import write_usd
 from samba.ingest.bvh import read_bvh
-
-from samba.body.skeleton import Body
-from samba.cli import main
 from samba.synthetic.motions import generate
 
 

@@ -13,6 +13,7 @@ from itertools import pairwise
 
 import numpy as np
 import pytest
+
 from samba.service.frame_sync import RECENT_PACKETS, FrameSync, SyncedFrame
 from samba.service.packet import MarkerPacket
 

@@ -21,15 +21,15 @@ import pygltflib as gltf
 import pytest
 from export_fixtures import box_mesh, real_takes, synthetic_motion
 from glb_edit import with_json
+
+from samba.body.take import Take
 from samba.export.avatar_mesh import AvatarMesh
 from samba.export.errors import ExportError
 from samba.export.gltf_reader import read_glb_joint_positions
 from samba.export.gltf_writer import write_glb
 from samba.export.humanoid import N_BONES, HumanoidRig
 from samba.export.motion import HumanoidMotion
-from samba.export.retarget import bone_direction_errors, retarget
-
-from samba.body.take import Take
+from samba.export.retargeting import bone_direction_errors, retarget
 from samba.synthetic import motions as synthetic
 
 VALIDATOR = "gltf-validator@2.0.0-dev.3.10"

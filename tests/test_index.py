@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from samba.db.errors import QueryError, StoreError
-from samba.db.index import APPROXIMATE_EPS, PoseIndex
-from samba.ingest.bvh_take import load_bvh_take
 
 from samba.body.alignment import align_markers
 from samba.body.perturb import perturb_joint_angles
 from samba.body.skeleton import Body, markers_of
+from samba.db.errors import QueryError, StoreError
+from samba.db.index import APPROXIMATE_EPS, PoseIndex
+from samba.ingest.bvh_take import load_bvh_take
 
 
 def _database(n: int, seed: int = 0) -> np.ndarray:

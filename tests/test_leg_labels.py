@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 
 from samba.body.skeleton import markers_of, standing_pose
 from samba.cameras.camera import CameraGroup
 from samba.cameras.synthetic_cameras import with_size
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.markers.camera_chain import ChainSettings, run_chain
 from samba.markers.cross_view_labels import FRESH_FRAMES, CrossViewLabeller, CrossViewSettings
 from samba.markers.leg_labels import KNOWN, LegBody, ShinMeter, assign_legs

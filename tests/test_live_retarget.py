@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from samba.export.humanoid import HumanoidRig
-from samba.export.live_retarget import LiveRetarget, retarget_together
-from samba.export.retarget import leg_length, local_rotations, rest_frames, retarget
 from scipy.spatial.transform import Rotation
 
 from samba.body.skeleton import Body
+from samba.export.humanoid import HumanoidRig
+from samba.export.live_retarget import LiveRetarget, retarget_together
+from samba.export.retargeting import leg_length, local_rotations, rest_frames, retarget
 from samba.synthetic.motions import generate
 
 T_POSE = HumanoidRig.from_body()

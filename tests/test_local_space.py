@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from samba.db.index import PoseIndex
 
 from samba.body.skeleton import markers_of
+from samba.db.index import PoseIndex
 from samba.reconstruct.local_space import (
     EnergyTerms,
     LocalPoseSpace,

@@ -7,13 +7,13 @@ from typing import NamedTuple
 import numpy as np
 import pytest
 import trimesh
+
+from samba.body.skeleton import Body
 from samba.export.avatar_mesh import MAX_INFLUENCES, AvatarMesh
 from samba.export.humanoid import BONE_INDEX, BONE_NAMES, N_BONES, TIP_BONES, HumanoidRig
 from samba.export.mannequin import MIN_FACES, body_height, mannequin
 from samba.export.motion import HumanoidMotion
-from samba.export.retarget import retarget
-
-from samba.body.skeleton import Body
+from samba.export.retargeting import retarget
 
 T_POSE = HumanoidRig.from_body()
 A_POSE_SMALL = HumanoidRig.from_body(Body.from_height(1.5), arm_angle_deg=40)

@@ -21,6 +21,8 @@ from markerless_fixtures import (
     mpjpe_cm,
     write_camera_calibration,
 )
+
+from samba.cli import main
 from samba.db.shape_tree_file import read_shape_tree, tree_path, write_shape_tree
 from samba.db.store import PoseStore
 from samba.db.synthetic_store import build_synthetic_store
@@ -30,8 +32,6 @@ from samba.service.packet import MarkerPacket, PosePacket, decode, encode
 from samba.service.serve import LiveServer
 from samba.service.session_config import SessionConfig
 from samba.service.silhouette_node import SilhouetteNode
-
-from samba.cli import main
 from samba.silhouette.extraction import SilhouetteExtractor
 from samba.silhouette.shape_tree import ShapeTree
 from samba.silhouette.view import SilhouetteView

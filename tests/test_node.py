@@ -13,7 +13,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 import samba.service.node
+from samba.body.skeleton import markers_of
+from samba.cameras.calibration_file import write_calibration
+from samba.cameras.camera import Camera, CameraGroup
+from samba.cameras.frame_io import write_images, write_video
+from samba.cli import main
+from samba.markers.lead_in import LeadIn
+from samba.markers.observation import spread_cameras
 from samba.service.errors import PacketError
 from samba.service.node import (
     CameraNode,
@@ -25,14 +33,6 @@ from samba.service.node import (
     synthetic_lead_in,
 )
 from samba.service.packet import MarkerPacket, decode
-
-from samba.body.skeleton import markers_of
-from samba.cameras.calibration_file import write_calibration
-from samba.cameras.camera import Camera, CameraGroup
-from samba.cameras.frame_io import write_images, write_video
-from samba.cli import main
-from samba.markers.lead_in import LeadIn
-from samba.markers.observation import spread_cameras
 
 MOTION, SECONDS, FPS, SEED = "walk", 1.0, 30.0, 3
 FRAMES = round((1.0 + SECONDS) * FPS)

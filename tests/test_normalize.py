@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bvh_fixtures import LEG_LENGTH, HumanoidFixture, make_humanoid
-from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba.ingest.errors import BvhError
-from samba.ingest.normalize import UNITS, leading_tpose_frames, leg_length
 
 from samba.body.skeleton import JOINT_INDEX, bone_lengths
 from samba.body.take import Take
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.ingest.errors import BvhError
+from samba.ingest.normalize import UNITS, leading_tpose_frames, leg_length
 
 HEAD, FEET = JOINT_INDEX["head"], [JOINT_INDEX["l_foot"], JOINT_INDEX["r_foot"]]
 ATOL = 2e-5

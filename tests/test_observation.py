@@ -7,14 +7,19 @@ from functools import cache
 import numpy as np
 import pytest
 
-from samba.body.skeleton import BONES, bone_lengths, markers_of, standard_pose
+from samba.body.skeleton import (
+    BONES,
+    bone_lengths,
+    facing_directions,
+    markers_of,
+    mean_facing,
+    standard_pose,
+)
 from samba.cameras.camera import Camera
 from samba.markers.observation import (
     ObservedMarkers,
     evaluation_cameras,
-    facing_directions,
     marker_coverage,
-    mean_facing,
     new_user_factors,
     observe_markers,
     scale_limbs,

@@ -13,9 +13,11 @@ import struct
 
 import numpy as np
 import pytest
-import samba.service.packet
 from hypothesis import given
 from hypothesis import strategies as st
+
+import samba.service.packet
+from samba.base.errors import InputError
 from samba.service.errors import PacketError
 from samba.service.packet import (
     BODY_BYTES,
@@ -32,8 +34,6 @@ from samba.service.packet import (
     encode,
     sequence_delta,
 )
-
-from samba.base.errors import InputError
 
 KEY = b"k" * 32
 OTHER_KEY = b"o" * 32

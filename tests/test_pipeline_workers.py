@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from live_fixtures import config
+
+from samba.base.errors import InputError
 from samba.db.store import PoseStore
 from samba.db.synthetic_store import build_synthetic_store
 from samba.service.errors import ServiceError
@@ -19,8 +21,6 @@ from samba.service.frame_pipeline import CameraMarkers
 from samba.service.pipeline_workers import FrameDone, InlinePipelines, WorkerPipelines
 from samba.service.session_indexes import SessionIndexes
 from samba.service.synthetic_capture import SyntheticCapture
-
-from samba.base.errors import InputError
 from samba.synthetic.motions import generate
 
 

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import samba.db.index
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from samba.db.index import PoseIndex
 
+import samba.db.index
 from samba.body.skeleton import markers_of, mirror_poses, standard_pose
+from samba.db.index import PoseIndex
 from samba.reconstruct.methods import method
 from samba.reconstruct.reconstruction import Reconstruction, Reconstructor, reconstruct_together
 from samba.synthetic.motions import MOTIONS, generate, library

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from samba.export.humanoid import BONE_INDEX, BONE_NAMES, PARENTS, HumanoidRig
-from samba.export.motion import HumanoidMotion
-from samba.export.retarget import MEASURED_BONES, bone_direction_errors, leg_length, retarget
 
 from samba.body.skeleton import Body
+from samba.export.humanoid import BONE_INDEX, BONE_NAMES, PARENTS, HumanoidRig
+from samba.export.motion import HumanoidMotion
+from samba.export.retargeting import MEASURED_BONES, bone_direction_errors, leg_length, retarget
 from samba.synthetic.motions import generate
 
 T_POSE = HumanoidRig.from_body()

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bvh_fixtures import MAPPED_KEYS, RIG_NAMES, make_humanoid, rig_names
+
+from samba.body.skeleton import JOINT_NAMES
 from samba.ingest.bvh import parse_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.errors import RigError
 from samba.ingest.rigs import BUILTIN_RIGS, RigMap, detect_rig, map_rig, rig_by_name
-
-from samba.body.skeleton import JOINT_NAMES
 
 CUSTOM = {
     "hips": "Bone_Pelvis",

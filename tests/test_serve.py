@@ -16,14 +16,14 @@ import numpy as np
 import pytest
 from aiohttp import ClientSession
 from live_fixtures import VmcReceiver, config, offline_poses, until
+
+from samba.base.errors import InputError
 from samba.ingest.mcap_take import read_take
 from samba.service.errors import ServiceError
 from samba.service.packet import encode
 from samba.service.serve import CORES, LiveServer, auto_workers
 from samba.service.session_config import read_sessions
 from samba.service.synthetic_capture import SyntheticCapture, play
-
-from samba.base.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -17,13 +17,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from live_fixtures import ServeProcess, VmcReceiver, config, serve_process
 from mcap.reader import make_reader
+from udp_fault_proxy import UdpFaultProxy
+
+from samba.cameras.calibration_file import write_calibration
 from samba.ingest.mcap_take import read_take
 from samba.service.packet import decode, encode
 from samba.service.server import CaptureServer
 from samba.service.synthetic_capture import SyntheticCapture, play
-from udp_fault_proxy import UdpFaultProxy
-
-from samba.cameras.calibration_file import write_calibration
 
 ROOT = Path(__file__).resolve().parents[1]
 

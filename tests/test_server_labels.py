@@ -14,11 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from live_fixtures import config
-from samba.service.frame_pipeline import CameraMarkers, FramePipeline
-from samba.service.node import CameraNode, SubjectStart, SyntheticFeed
-from samba.service.packet import MarkerPacket
-from samba.service.pipeline_workers import FrameDone, InlinePipelines
-from samba.service.session import CaptureSession
 
 from samba.body.skeleton import N_MARKERS, markers_of
 from samba.cameras.calibration_file import write_calibration
@@ -27,6 +22,11 @@ from samba.cameras.synthetic_cameras import with_size
 from samba.markers.lead_in import standing_lead_in
 from samba.markers.observation import spread_cameras
 from samba.markers.stage_tracking import StageTracker
+from samba.service.frame_pipeline import CameraMarkers, FramePipeline
+from samba.service.node import CameraNode, SubjectStart, SyntheticFeed
+from samba.service.packet import MarkerPacket
+from samba.service.pipeline_workers import FrameDone, InlinePipelines
+from samba.service.session import CaptureSession
 from samba.synthetic.motions import generate
 
 FPS = 30.0

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from samba.db.errors import StoreError
-from samba.db.shape_tree_file import FORMAT, read_shape_tree, tree_path, write_shape_tree
 from silhouette_fixtures import BODY, CAMERA, build_small_tree
 
 from samba.body.body_model import BodyModel
+from samba.db.errors import StoreError
+from samba.db.shape_tree_file import FORMAT, read_shape_tree, tree_path, write_shape_tree
 from samba.silhouette.distance import SilhouetteWeights, downsampled
 from samba.silhouette.evaluation import observed_silhouettes, staged
 from samba.silhouette.runs import RowSums

@@ -9,9 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from live_fixtures import config
-from samba.service.packet import MAX_BLOBS, MarkerPacket
-from samba.service.pipeline_workers import FrameDone, InlinePipelines
-from samba.service.session import CaptureSession
 from scipy.spatial.transform import Rotation
 
 from samba.base.errors import InputError
@@ -24,6 +21,9 @@ from samba.markers.lead_in import standing_lead_in
 from samba.markers.observation import spread_cameras
 from samba.markers.stage_tracking import STILL_FRAMES, StageTracker
 from samba.markers.standard_pose_search import StandardPoseSearch
+from samba.service.packet import MAX_BLOBS, MarkerPacket
+from samba.service.pipeline_workers import FrameDone, InlinePipelines
+from samba.service.session import CaptureSession
 from samba.synthetic.motions import generate, random_standing
 
 FPS = 30.0

@@ -12,14 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bvh_fixtures import humanoid_bvh
-from samba.db.errors import StoreCorruptedError, StoreError
-from samba.db.index import PoseIndex
-from samba.db.store import CATALOG, INDEX, POSE_BYTES, ROW_BYTES, PoseStore, drop_near_duplicates
-from samba.ingest.batch import import_paths
 
 from samba.body.perturb import perturb_joint_angles
 from samba.body.skeleton import Body, markers_of, mirror_poses
 from samba.body.take import Take
+from samba.db.errors import StoreCorruptedError, StoreError
+from samba.db.index import PoseIndex
+from samba.db.store import CATALOG, INDEX, POSE_BYTES, ROW_BYTES, PoseStore, drop_near_duplicates
+from samba.ingest.batch import import_paths
 
 
 def make_poses(n: int, seed: int) -> np.ndarray:

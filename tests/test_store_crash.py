@@ -21,8 +21,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from samba.db.index import PoseIndex
-from samba.db.store import INDEX, POSE_BYTES, ROW_BYTES, PoseStore
 from store_writer import (
     apply,
     is_mirrored,
@@ -35,6 +33,8 @@ from store_writer import (
 )
 
 from samba.body.skeleton import markers_of, mirror_poses
+from samba.db.index import PoseIndex
+from samba.db.store import INDEX, POSE_BYTES, ROW_BYTES, PoseStore
 
 ROOT = Path(__file__).resolve().parents[1]
 WRITER = Path(__file__).with_name("store_writer.py")

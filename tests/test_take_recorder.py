@@ -15,18 +15,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from samba.db.store import PoseStore
-from samba.ingest.bvh import read_bvh
-from samba.ingest.errors import TakeFileError
-from samba.ingest.mcap_take import read_take
-from samba.service.errors import ServiceError
-from samba.service.take_recorder import SKELETON_LINES, TakeRecorder
 
 from samba.base.errors import InputError
 from samba.body.skeleton import markers_of
 from samba.body.take import Take
 from samba.cli import main
+from samba.db.store import PoseStore
+from samba.ingest.bvh import read_bvh
+from samba.ingest.errors import TakeFileError
+from samba.ingest.mcap_take import read_take
 from samba.reconstruct.reconstruction import PoseEstimate
+from samba.service.errors import ServiceError
+from samba.service.take_recorder import SKELETON_LINES, TakeRecorder
 from samba.synthetic.motions import generate
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -27,14 +27,14 @@ from markerless_fixtures import (
     write_image_folder,
     write_mjpg_video,
 )
-from samba.db.shape_tree_file import read_shape_tree, tree_path, write_shape_tree
-from samba.db.store import PoseStore
-from samba.db.synthetic_store import build_synthetic_store
-from samba.ingest.mcap_take import read_take
 
 from samba.cameras.camera import Camera
 from samba.cameras.frame_source import open_frames
 from samba.cli import main
+from samba.db.shape_tree_file import read_shape_tree, tree_path, write_shape_tree
+from samba.db.store import PoseStore
+from samba.db.synthetic_store import build_synthetic_store
+from samba.ingest.mcap_take import read_take
 from samba.silhouette.shape_tree import ShapeTree
 from samba.silhouette.view import SilhouetteView
 from samba.synthetic.motions import generate

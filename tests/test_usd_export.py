@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 from export_fixtures import box_mesh, real_takes, synthetic_motion
 from pxr import Gf, Usd, UsdGeom, UsdSkel
+
+from samba.body.take import Take
 from samba.export.avatar_mesh import AvatarMesh
 from samba.export.errors import ExportError
 from samba.export.humanoid import BONE_INDEX, N_BONES, HumanoidRig
 from samba.export.motion import HumanoidMotion
-from samba.export.retarget import bone_direction_errors, retarget
+from samba.export.retargeting import bone_direction_errors, retarget
 from samba.export.usd_reader import read_usd_joint_positions, usd_validation_errors
 from samba.export.usd_writer import write_usd
-
-from samba.body.take import Take
 from samba.synthetic import motions as synthetic
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,6 +18,8 @@ import aiohttp
 import numpy as np
 import pytest
 from aiohttp import web
+
+from samba.body.skeleton import JOINT_NAMES, MARKER_NAMES, markers_of
 from samba.service.take_recorder import SKELETON_LINES
 from samba.service.viewer import (
     CONTENT_SECURITY_POLICY,
@@ -27,8 +29,6 @@ from samba.service.viewer import (
     frame_message,
     hello_message,
 )
-
-from samba.body.skeleton import JOINT_NAMES, MARKER_NAMES, markers_of
 from samba.synthetic.motions import generate
 from tests.chromium_page import ChromiumPage, find_chromium
 

@@ -21,14 +21,14 @@ from export_fixtures import synthetic_motion
 from pythonosc.dispatcher import Dispatcher
 from pythonosc.osc_bundle import OscBundle
 from pythonosc.osc_server import ThreadingOSCUDPServer
-from samba.export.humanoid import BONE_INDEX, BONE_NAMES, N_BONES, PARENTS, HumanoidRig
-from samba.export.motion import HumanoidMotion
-from samba.export.retarget import retarget
-from samba.service.errors import ServiceError
-from samba.service.vmc import MAX_BUNDLE_BYTES, VmcSender, frame_bundles, unity_pose, vmc_frame
 from scipy.spatial.transform import Rotation
 
 from samba.body.skeleton import Body
+from samba.export.humanoid import BONE_INDEX, BONE_NAMES, N_BONES, PARENTS, HumanoidRig
+from samba.export.motion import HumanoidMotion
+from samba.export.retargeting import retarget
+from samba.service.errors import ServiceError
+from samba.service.vmc import MAX_BUNDLE_BYTES, VmcSender, frame_bundles, unity_pose, vmc_frame
 
 OSC_JS = "osc@2.4.5"
 RUNNER = Path(__file__).with_name("osc_receive.js")

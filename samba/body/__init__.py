@@ -1,3 +1,86 @@
-"""The 13-joint body: joints, the 8-marker set, bones, kinematics, canonical alignment,
-takes, and the capsule body model of the markerless modes.
+"""The 13-joint body every part of Samba shares: joints, the 8-marker set, bones and the
+standard pose (`skeleton`), forward kinematics, the canonical alignment of markers, takes,
+line-segment distances, and the capsule body model of the markerless modes.
 """
+
+
+from samba.body.alignment import Alignment, align_markers, has_heading
+from samba.body.body_model import (
+    CAPSULE_NAMES,
+    CAPSULE_PARTS,
+    KINDS,
+    PART_NAMES,
+    BodyModel,
+    checked_poses,
+    scaled_to,
+)
+from samba.body.kinematics import (
+    continuous_quaternions,
+    euler_to_quaternions,
+    forward_kinematics,
+    resample_times,
+    sample_linear,
+    sample_rotations,
+    unit_vectors,
+)
+from samba.body.segments import point_segment_distances, segment_distances
+from samba.body.skeleton import (
+    BONES,
+    JOINT_INDEX,
+    JOINT_NAMES,
+    MARKER_JOINTS,
+    MARKER_NAMES,
+    N_JOINTS,
+    N_MARKERS,
+    TORSO_EDGES,
+    UNOBSERVED_JOINTS,
+    Body,
+    facing_directions,
+    markers_of,
+    mean_facing,
+    mirror_poses,
+    pose_batch,
+    standard_pose,
+    standing_pose,
+)
+from samba.body.take import Take
+
+__all__ = [
+    "BONES",
+    "CAPSULE_NAMES",
+    "CAPSULE_PARTS",
+    "JOINT_INDEX",
+    "JOINT_NAMES",
+    "KINDS",
+    "MARKER_JOINTS",
+    "MARKER_NAMES",
+    "N_JOINTS",
+    "N_MARKERS",
+    "PART_NAMES",
+    "TORSO_EDGES",
+    "UNOBSERVED_JOINTS",
+    "Alignment",
+    "Body",
+    "BodyModel",
+    "Take",
+    "align_markers",
+    "checked_poses",
+    "continuous_quaternions",
+    "euler_to_quaternions",
+    "facing_directions",
+    "forward_kinematics",
+    "has_heading",
+    "markers_of",
+    "mean_facing",
+    "mirror_poses",
+    "point_segment_distances",
+    "pose_batch",
+    "resample_times",
+    "sample_linear",
+    "sample_rotations",
+    "scaled_to",
+    "segment_distances",
+    "standard_pose",
+    "standing_pose",
+    "unit_vectors",
+]

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from samba.base.errors import InputError
+from samba.base import InputError
 from samba.body.kinematics import unit_vectors
 from samba.body.skeleton import N_JOINTS, Body
 

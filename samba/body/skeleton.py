@@ -37,6 +37,7 @@ JOINT_NAMES: tuple[str, ...] = (
 )
 N_JOINTS = len(JOINT_NAMES)
 JOINT_INDEX: dict[str, int] = {name: i for i, name in enumerate(JOINT_NAMES)}
+_UP = np.array([0.0, 1.0, 0.0])
 
 MARKER_JOINTS: tuple[int, ...] = (1, 2, 5, 6, 9, 10, 11, 12)
 """Joint index of each of the 8 markers, in marker order."""
@@ -189,3 +190,41 @@ def mirror_poses(poses: np.ndarray) -> np.ndarray:
 def markers_of(poses: np.ndarray) -> np.ndarray:
     """The 8 marker positions (..., 8, 3) of poses (..., 13, 3)."""
     return np.asarray(poses)[..., MARKER_JOINTS, :]
+
+
+def pose_batch(poses: np.ndarray) -> np.ndarray:
+    """Poses as a float64 array (n, 13, 3); ValueError naming the shape otherwise."""
+    poses = np.asarray(poses, dtype=np.float64)
+    if poses.ndim != 3 or poses.shape[1:] != (N_JOINTS, 3):
+        raise ValueError(f"poses must be (n, 13, 3), got {poses.shape}")
+    return poses
+
+
+def facing_directions(poses: np.ndarray) -> np.ndarray:
+    """Unit horizontal facing direction (n, 3) of poses (n, 13, 3); NaN if undefined.
+
+    The facing is the horizontal part of (l_shoulder - r_shoulder) x up: +Z for a subject
+    whose left shoulder is at +X (the standard pose). Frames whose shoulder line is
+    vertical give NaN.
+    """
+    poses = pose_batch(poses)
+    across = poses[:, JOINT_INDEX["l_shoulder"]] - poses[:, JOINT_INDEX["r_shoulder"]]
+    facing = np.cross(across, _UP)
+    facing[:, 1] = 0.0
+    norm = np.linalg.norm(facing, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(norm > 1e-9, facing / norm, np.nan)
+
+
+def mean_facing(poses: np.ndarray) -> np.ndarray:
+    """The normalised mean (3,) of the per-frame unit facing directions of poses (n, 13, 3).
+
+    Falls back to +Z when the facings cancel out (a take that turns full circle evenly).
+    """
+    facings = facing_directions(poses)
+    known = ~np.isnan(facings[:, 0])
+    mean = facings[known].sum(axis=0) / max(int(known.sum()), 1)
+    norm = np.linalg.norm(mean)
+    if not norm > 1e-6:
+        return np.array([0.0, 0.0, 1.0])
+    return mean / norm

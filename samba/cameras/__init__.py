@@ -1,3 +1,36 @@
-"""Cameras: the calibrated camera model, calibration from boards (bundle adjustment, files
-of other tools), the frames of a camera, and triangulation.
+"""Cameras: the calibrated camera model and camera groups, calibration from board images
+(detection, bundle adjustment, recordings), calibration files of other tools, the frames of
+a camera (image folders, videos), and triangulation.
 """
+
+
+from samba.cameras.calibration import WORLDS
+from samba.cameras.calibration_board import BOARD_SPEC_HELP, parse_board
+from samba.cameras.calibration_file import read_calibration, write_calibration
+from samba.cameras.camera import Camera, CameraGroup
+from samba.cameras.frame_io import read_frames, write_video
+from samba.cameras.frame_source import FrameSource, open_frames, open_video
+from samba.cameras.recordings import RecordingCalibration, calibrate_recordings
+from samba.cameras.synthetic_cameras import with_size
+from samba.cameras.triangulation import Triangulation, triangulate, triangulate_cameras
+
+__all__ = [
+    "BOARD_SPEC_HELP",
+    "WORLDS",
+    "Camera",
+    "CameraGroup",
+    "FrameSource",
+    "RecordingCalibration",
+    "Triangulation",
+    "calibrate_recordings",
+    "open_frames",
+    "open_video",
+    "parse_board",
+    "read_calibration",
+    "read_frames",
+    "triangulate",
+    "triangulate_cameras",
+    "with_size",
+    "write_calibration",
+    "write_video",
+]

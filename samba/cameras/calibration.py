@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from samba.base.errors import InputError
+from samba.base import InputError
 from samba.cameras.bundle_adjustment import Observations, bundle_adjust
 from samba.cameras.calibration_board import Board, BoardView
 from samba.cameras.camera import Camera, CameraGroup

@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 from scipy.spatial.distance import pdist
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 KINDS = ("checkerboard", "charuco")
 """The board kinds `parse_board` accepts."""

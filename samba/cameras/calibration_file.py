@@ -42,8 +42,7 @@ import numpy as np
 import tomli_w
 from scipy.spatial.transform import Rotation
 
-from samba.base.atomic_file import write_text_atomic
-from samba.base.errors import InputError
+from samba.base import InputError, write_text_atomic
 from samba.cameras.camera import Camera, CameraGroup
 
 UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}

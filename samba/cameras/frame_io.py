@@ -16,7 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from samba.base.errors import InputError
+from samba.base import InputError
 from samba.cameras.frame_source import open_video
 
 IMAGE_EXTENSIONS = (".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg", ".pgm", ".ppm")

@@ -19,7 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 """File extensions (any case) read as images from a folder."""

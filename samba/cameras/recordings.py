@@ -1,6 +1,6 @@
-"""`samba calibrate`: calibrate a group of cameras from synchronised images of a board.
+"""Calibrating a group of cameras from their recordings of a board (`samba calibrate`).
 
-Each positional argument is one camera: a folder of images or a video file
+Each recording is one camera: a folder of images or a video file
 (`samba.cameras.frame_source`); frame n of every camera is the same instant. The board is found
 in every frame (`samba.cameras.calibration_board`), the cameras are calibrated jointly
 (`samba.cameras.calibration`) and written as a calibration file (`samba.cameras.calibration_file`).
@@ -9,78 +9,80 @@ A camera is named after its folder or video file (without the extension).
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Sequence
-from pathlib import Path
+from dataclasses import dataclass
 
-import numpy as np
 from tqdm import tqdm
 
-from samba.base.arguments import natural, positive
-from samba.base.errors import InputError
-from samba.cameras.calibration import MIN_VIEWS, WORLDS, CalibrationResult, calibrate
-from samba.cameras.calibration_board import BOARD_SPEC_HELP, Board, BoardView, parse_board
-from samba.cameras.calibration_file import write_calibration
+from samba.base import InputError
+from samba.cameras.calibration import MIN_VIEWS, CalibrationResult, calibrate
+from samba.cameras.calibration_board import Board, BoardView
 from samba.cameras.frame_source import FrameSource, open_frames
 
 
-def register(parser: argparse.ArgumentParser) -> None:
-    """Add the `calibrate` arguments to `parser`."""
-    parser.add_argument(
-        "sources",
-        nargs="+",
-        metavar="IMAGES_OR_VIDEO",
-        help="one per camera: a folder of images (frames in file-name order) or a video file",
-    )
-    parser.add_argument("--board", required=True, metavar="SPEC", help=BOARD_SPEC_HELP)
-    parser.add_argument(
-        "-o", "--output", required=True, metavar="CALIB.toml", help="calibration file to write"
-    )
-    parser.add_argument(
-        "--world",
-        choices=WORLDS,
-        default="board",
-        help="board: the board lies face up on the floor in --floor-frame, which becomes "
-        "y = 0 with the origin at its first corner; camera0: the first camera at the "
-        "origin looking along -Z (default board)",
-    )
-    parser.add_argument(
-        "--floor-frame",
-        type=natural,
-        metavar="N",
-        help="frame in which the board lies on the floor (default: the first frame in "
-        "which any camera sees the board)",
-    )
-    parser.add_argument(
-        "--every",
-        type=positive,
-        default=1,
-        metavar="N",
-        help="use every N-th frame only (frame numbers keep counting all frames)",
-    )
-    parser.add_argument(
-        "--refine-intrinsics",
-        action="store_true",
-        help="also refine focal lengths, principal points and distortion in the joint "
-        "adjustment (slower; helps when each camera saw the board in few images)",
-    )
-    parser.set_defaults(run=_run)
+@dataclass(frozen=True)
+class RecordingCalibration:
+    """What `calibrate_recordings` found and solved: the calibration `result`, and per
+    camera the frames examined and the board's views (frame number -> view)."""
+
+    result: CalibrationResult
+    frames: list[int]
+    detections: list[dict[int, BoardView]]
+
+    def report(self) -> str:
+        """The table `samba calibrate` prints: per camera the frames examined, those with
+        the board, those used, the reprojection error, intrinsics and position (m)."""
+        result = self.result
+        header = (
+            f"{'camera':<12} {'frames':>6} {'board':>6} {'used':>5} {'rms px':>7} {'fx':>8} "
+            f"{'fy':>8} {'cx':>7} {'cy':>7}  position (m)"
+        )
+        lines = [header, "-" * len(header)]
+        for i, camera in enumerate(result.cameras):
+            k = camera.matrix
+            x, y, z = camera.center
+            lines.append(
+                f"{camera.name:<12} {self.frames[i]:>6} {len(self.detections[i]):>6} "
+                f"{result.views[i]:>5} {result.rms_px[i]:>7.3f} {k[0, 0]:>8.1f} "
+                f"{k[1, 1]:>8.1f} {k[0, 2]:>7.1f} {k[1, 2]:>7.1f}  ({x:6.3f}, {y:6.3f}, {z:6.3f})"
+            )
+        lines.append(
+            "frames: examined; board: frames in which the board was found; used: of those, in"
+        )
+        lines.append("the joint adjustment; rms px: reprojection error there")
+        if result.world == "board":
+            lines.append(
+                f"world: the board on the floor in frame {result.floor_frame} is y = 0, "
+                "+Y up, origin at its first corner, meters"
+            )
+        else:
+            lines.append(
+                f"world: camera {result.cameras[0].name} at the origin looking along -Z, +Y up"
+            )
+        return "\n".join(lines)
 
 
-def _run(args: argparse.Namespace) -> int:
-    board = parse_board(args.board)
-    output = Path(args.output)
-    if not output.resolve().parent.is_dir():
-        raise InputError("--output", f"folder of {output} does not exist")
-    sources = [open_frames(path) for path in args.sources]
-    names = _camera_names(sources)
-    if args.floor_frame is not None and args.world != "board":
+def calibrate_recordings(
+    paths: Sequence[str],
+    board: Board,
+    world: str = "board",
+    floor_frame: int | None = None,
+    every: int = 1,
+    refine_intrinsics: bool = False,
+) -> RecordingCalibration:
+    """Calibrate the cameras of `paths` (one folder of images or video per camera; frame
+    n of every camera is the same instant) from the `board` found in every `every`-th
+    frame (`samba.cameras.calibration.calibrate` with `world`, `floor_frame` and
+    `refine_intrinsics`). Cameras are named after their folder or video file. Raises
+    `InputError` naming the flag or recording that is wrong."""
+    sources = [open_frames(path) for path in paths]
+    if floor_frame is not None and world != "board":
         raise InputError("--floor-frame", "applies to --world board only")
-    if args.floor_frame is not None and args.floor_frame % args.every:
-        raise InputError("--floor-frame", f"frame {args.floor_frame} is skipped by --every")
+    if floor_frame is not None and floor_frame % every:
+        raise InputError("--floor-frame", f"frame {floor_frame} is skipped by --every")
     detections, sizes, frames = [], [], []
     for source in sources:
-        found, size, count = _detect(board, source, args.every)
+        found, size, count = _detect(board, source, every)
         detections.append(found)
         sizes.append(size)
         frames.append(count)
@@ -88,15 +90,12 @@ def _run(args: argparse.Namespace) -> int:
         board,
         detections,
         sizes,
-        names,
-        world=args.world,
-        floor_frame=args.floor_frame,
-        refine_intrinsics=args.refine_intrinsics,
+        _camera_names(sources),
+        world=world,
+        floor_frame=floor_frame,
+        refine_intrinsics=refine_intrinsics,
     )
-    _print_report(result, frames, detections)
-    write_calibration(output, result.cameras, error_px=float(np.mean(result.rms_px)))
-    print(f"wrote {output}")
-    return 0
+    return RecordingCalibration(result, frames, detections)
 
 
 def _camera_names(sources: Sequence[FrameSource]) -> list[str]:
@@ -132,33 +131,3 @@ def _detect(
             f"needs at least {MIN_VIEWS}",
         )
     return found, size, count
-
-
-def _print_report(
-    result: CalibrationResult,
-    frames: Sequence[int],
-    detections: Sequence[dict[int, BoardView]],
-) -> None:
-    header = (
-        f"{'camera':<12} {'frames':>6} {'board':>6} {'used':>5} {'rms px':>7} {'fx':>8} "
-        f"{'fy':>8} {'cx':>7} {'cy':>7}  position (m)"
-    )
-    print(header)
-    print("-" * len(header))
-    for i, camera in enumerate(result.cameras):
-        k = camera.matrix
-        x, y, z = camera.center
-        print(
-            f"{camera.name:<12} {frames[i]:>6} {len(detections[i]):>6} {result.views[i]:>5} "
-            f"{result.rms_px[i]:>7.3f} {k[0, 0]:>8.1f} {k[1, 1]:>8.1f} {k[0, 2]:>7.1f} "
-            f"{k[1, 2]:>7.1f}  ({x:6.3f}, {y:6.3f}, {z:6.3f})"
-        )
-    print("frames: examined; board: frames in which the board was found; used: of those, in")
-    print("the joint adjustment; rms px: reprojection error there")
-    if result.world == "board":
-        print(
-            f"world: the board on the floor in frame {result.floor_frame} is y = 0, "
-            "+Y up, origin at its first corner, meters"
-        )
-    else:
-        print(f"world: camera {result.cameras[0].name} at the origin looking along -Z, +Y up")

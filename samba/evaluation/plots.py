@@ -15,7 +15,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from samba.body.skeleton import JOINT_NAMES
+from samba.body import JOINT_NAMES
 from samba.evaluation.protocol import TakeErrors
 from samba.evaluation.report import Summary, SweepPoint
 

@@ -17,14 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from samba.body.skeleton import JOINT_NAMES, MARKER_JOINTS, UNOBSERVED_JOINTS
-from samba.markers.observation import (
-    evaluation_cameras,
-    new_user_factors,
-    observe_markers,
-    scale_limbs,
-)
-from samba.reconstruct.reconstruction import Reconstructor
+from samba.body import JOINT_NAMES, MARKER_JOINTS, UNOBSERVED_JOINTS
+from samba.markers import evaluation_cameras, new_user_factors, observe_markers, scale_limbs
+from samba.reconstruct import Reconstructor
 
 REFERENCE_TIBIA = 0.45
 """Knee-to-ankle length (m) every take is scaled to before MPJPE in cm (the paper's)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from samba.body.skeleton import JOINT_NAMES, MARKER_JOINTS
+from samba.body import JOINT_NAMES, MARKER_JOINTS
 
 Summary = Mapping[str, object]
 SweepPoint = tuple[int, int, str]

@@ -22,10 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from samba.body.skeleton import N_MARKERS, markers_of
-from samba.cameras.camera import Camera, CameraGroup
-from samba.cameras.frame_io import read_frames, write_video
-from samba.cameras.triangulation import triangulate
+from samba.body import N_MARKERS, markers_of
+from samba.cameras import Camera, CameraGroup, read_frames, triangulate, write_video
 from samba.markers.cross_view_labels import CrossViewSettings
 from samba.markers.detection import MERGED_AREA_RATIO, Blobs, detect_markers, static_mask
 from samba.markers.lead_in import LeadIn, standing_lead_in

@@ -61,10 +61,9 @@ from itertools import combinations
 
 import numpy as np
 
-from samba.base.errors import InputError
-from samba.body.skeleton import N_MARKERS
-from samba.cameras.camera import CameraGroup
-from samba.cameras.triangulation import Triangulation
+from samba.base import InputError
+from samba.body import N_MARKERS
+from samba.cameras import CameraGroup, Triangulation
 from samba.markers.leg_labels import (
     KNOWN,
     LEG_MARKERS,

@@ -34,7 +34,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 BACKGROUND_SAMPLES = 1024
 """About how many pixels (a strided grid) estimate the background level and noise."""

@@ -13,8 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from samba.body.skeleton import N_JOINTS, Body
-from samba.markers.observation import facing_directions, mean_facing
+from samba.body import N_JOINTS, Body, facing_directions, mean_facing
 
 
 @dataclass(frozen=True, eq=False)

@@ -31,7 +31,7 @@ from itertools import product
 
 import numpy as np
 
-from samba.body.skeleton import N_MARKERS
+from samba.body import N_MARKERS
 
 LEGS: tuple[tuple[int, int, int], ...] = ((0, 4, 6), (1, 5, 7))
 """(shoulder, knee, foot) marker indices of the left and the right side."""

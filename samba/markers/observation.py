@@ -18,9 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from samba.body.skeleton import BONES, JOINT_INDEX, N_JOINTS, N_MARKERS, markers_of
-from samba.cameras.camera import Camera
-from samba.cameras.triangulation import triangulate_cameras
+from samba.body import BONES, N_MARKERS, markers_of, mean_facing, pose_batch
+from samba.cameras import Camera, triangulate_cameras
 
 IMAGE_SIZE: tuple[int, int] = (160, 120)
 """(width, height) in pixels of the evaluation cameras."""
@@ -41,8 +40,6 @@ MAX_DISTANCE = 100.0
 LIMB_FACTOR_RANGE = (0.9, 1.1)
 """Range of the new-user variant's per-bone scale factors."""
 
-_UP = np.array([0.0, 1.0, 0.0])
-
 
 @dataclass(frozen=True, eq=False)
 class ObservedMarkers:
@@ -62,39 +59,9 @@ class ObservedMarkers:
         return ~np.isnan(self.markers).any(axis=-1)
 
 
-def facing_directions(poses: np.ndarray) -> np.ndarray:
-    """Unit horizontal facing direction (n, 3) of poses (n, 13, 3); NaN if undefined.
-
-    The facing is the horizontal part of (l_shoulder - r_shoulder) x up: +Z for a subject
-    whose left shoulder is at +X (the standard pose). Frames whose shoulder line is
-    vertical give NaN.
-    """
-    poses = _check_poses(poses)
-    across = poses[:, JOINT_INDEX["l_shoulder"]] - poses[:, JOINT_INDEX["r_shoulder"]]
-    facing = np.cross(across, _UP)
-    facing[:, 1] = 0.0
-    norm = np.linalg.norm(facing, axis=-1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(norm > 1e-9, facing / norm, np.nan)
-
-
-def mean_facing(poses: np.ndarray) -> np.ndarray:
-    """The normalised mean (3,) of the per-frame unit facing directions of poses (n, 13, 3).
-
-    Falls back to +Z when the facings cancel out (a take that turns full circle evenly).
-    """
-    facings = facing_directions(poses)
-    known = ~np.isnan(facings[:, 0])
-    mean = facings[known].sum(axis=0) / max(int(known.sum()), 1)
-    norm = np.linalg.norm(mean)
-    if not norm > 1e-6:
-        return np.array([0.0, 0.0, 1.0])
-    return mean / norm
-
-
 def marker_coverage(poses: np.ndarray, cameras: Sequence[Camera]) -> float:
     """Fraction of marker views (8 markers x n frames x c cameras) inside the images."""
-    markers = markers_of(_check_poses(poses))
+    markers = markers_of(pose_batch(poses))
     inside = [camera.in_image(camera.project(markers)) for camera in cameras]
     return float(np.mean(inside))
 
@@ -167,7 +134,7 @@ def observe_markers(
     triangulation; fewer than two views leave a marker NaN. Cameras must be
     distortion-free. `rng` draws the noise first, then the dropout.
     """
-    poses = _check_poses(poses)
+    poses = pose_batch(poses)
     if len(cameras) == 0:
         raise ValueError("observe_markers needs at least one camera")
     if not noise_px >= 0 or not resolution_px >= 0:
@@ -202,7 +169,7 @@ def scale_limbs(poses: np.ndarray, factors: np.ndarray) -> np.ndarray:
     offset, so the other bones keep their lengths and directions. The head, shoulders
     and hips are unchanged; the feet are not put back on the floor. Returns float64.
     """
-    poses = _check_poses(poses).copy()
+    poses = pose_batch(poses).copy()
     factors = np.asarray(factors, dtype=np.float64)
     if factors.shape != (len(BONES),):
         raise ValueError(f"factors must be ({len(BONES)},), one per bone, got {factors.shape}")
@@ -227,9 +194,3 @@ def _below(joint: int) -> list[int]:
             out.append(child)
     return out
 
-
-def _check_poses(poses: np.ndarray) -> np.ndarray:
-    poses = np.asarray(poses, dtype=np.float64)
-    if poses.ndim != 3 or poses.shape[1:] != (N_JOINTS, 3):
-        raise ValueError(f"poses must be (n, 13, 3), got {poses.shape}")
-    return poses

@@ -27,9 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import erfc
 
-from samba.body.segments import segment_distances
-from samba.body.skeleton import BONES, MARKER_JOINTS, N_JOINTS
-from samba.cameras.camera import Camera
+from samba.body import BONES, MARKER_JOINTS, N_JOINTS, pose_batch, segment_distances
+from samba.cameras import Camera
 
 CHUNK_FRAMES = 32
 """Frames rendered at once in float32 before conversion to uint8 (bounds the memory)."""
@@ -132,7 +131,7 @@ def hidden_by_body(poses: np.ndarray, camera: Camera, capsules: BodyCapsules) ->
     capsule's radius to that capsule's axis, for a capsule that does not contain the
     marker (a marker inside a capsule sits on that body part's surface).
     """
-    poses = _check_poses(poses)
+    poses = pose_batch(poses)
     starts, ends, radii = capsules.axes(poses)
     markers = poses[:, MARKER_JOINTS]  # (F, 8, 3)
     centre = np.broadcast_to(camera.center, markers.shape)
@@ -147,7 +146,7 @@ def hidden_by_body(poses: np.ndarray, camera: Camera, capsules: BodyCapsules) ->
 
 def marker_views(poses: np.ndarray, camera: Camera, options: RenderOptions) -> MarkerViews:
     """Projected centres, disc radii and visibility of the markers of poses (F, 13, 3)."""
-    poses = _check_poses(poses)
+    poses = pose_batch(poses)
     markers = poses[:, MARKER_JOINTS]
     pixels = camera.project(markers)
     depth = camera.to_camera(markers)[..., 2]
@@ -296,9 +295,3 @@ def _capsule_endpoints() -> tuple[np.ndarray, np.ndarray]:
     ends[neck, 0] = 1.0  # head
     return starts, ends
 
-
-def _check_poses(poses: np.ndarray) -> np.ndarray:
-    poses = np.asarray(poses, dtype=np.float64)
-    if poses.ndim != 3 or poses.shape[1:] != (N_JOINTS, 3):
-        raise ValueError(f"poses must be (F, 13, 3), got {poses.shape}")
-    return poses

@@ -41,10 +41,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from samba.base.errors import InputError
-from samba.body.skeleton import N_MARKERS, markers_of, standing_pose
-from samba.cameras.camera import CameraGroup
-from samba.cameras.triangulation import triangulate_cameras
+from samba.base import InputError
+from samba.body import N_MARKERS, markers_of, standing_pose
+from samba.cameras import CameraGroup, triangulate_cameras
 from samba.markers.cross_view_labels import CrossViewLabeller, CrossViewSettings
 from samba.markers.standard_pose_search import SHOULDERS, StandardPoseSearch, heading_of
 from samba.markers.tracking import MarkerTracker, TrackerSettings, subject_distance

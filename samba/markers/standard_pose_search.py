@@ -45,10 +45,9 @@ from itertools import combinations
 
 import numpy as np
 
-from samba.base.errors import InputError
-from samba.body.skeleton import N_MARKERS, Body, markers_of, standard_pose
-from samba.cameras.camera import CameraGroup
-from samba.cameras.triangulation import triangulate
+from samba.base import InputError
+from samba.body import N_MARKERS, Body, markers_of, standard_pose
+from samba.cameras import CameraGroup, triangulate
 from samba.markers.tracking import REFERENCE_FOCAL_PX
 
 SHOULDERS = (0, 1)

@@ -50,10 +50,9 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from samba.base.errors import InputError
-from samba.body.segments import segment_distances
-from samba.body.skeleton import MARKER_NAMES, N_MARKERS, markers_of, standing_pose
-from samba.cameras.camera import Camera
+from samba.base import InputError
+from samba.body import MARKER_NAMES, N_MARKERS, markers_of, segment_distances, standing_pose
+from samba.cameras import Camera
 
 REFERENCE_FOCAL_PX = 80.0 / np.tan(np.radians(30.0))
 """Focal length (px) of a 160-pixel-wide image with a 60-degree lens: the settings' scale."""

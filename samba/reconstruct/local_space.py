@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from samba.body.skeleton import MARKER_JOINTS, N_JOINTS
+from samba.body import MARKER_JOINTS, N_JOINTS
 
 POSE_DIMS = 3 * N_JOINTS
 MARKER_COORDS = np.array([3 * j + c for j in MARKER_JOINTS for c in range(3)])

@@ -12,12 +12,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from samba.reconstruct.reconstruction import (
-    NearestPose,
-    NeighbourSource,
-    ReconstructionConfig,
-    Reconstructor,
-)
+from samba.reconstruct.neighbours import NeighbourSource
+from samba.reconstruct.reconstruction import NearestPose, ReconstructionConfig, Reconstructor
 
 PAPER = ReconstructionConfig()
 """The paper's configuration: K = 10, N = 10 pseudo-poses of 5 degrees, PCA truncated to

@@ -15,15 +15,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from samba.body.alignment import Alignment, has_heading
-from samba.body.skeleton import N_JOINTS, N_MARKERS, markers_of
-
-if TYPE_CHECKING:
-    from samba.reconstruct.reconstruction import NeighbourSource
+from samba.body import N_JOINTS, N_MARKERS, Alignment, has_heading, markers_of
+from samba.reconstruct.neighbours import NeighbourSource
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from samba.body.skeleton import N_JOINTS
+from samba.body import N_JOINTS
 
 LIMB_ROOTS = [1, 2, 7, 8]
 """Ball joints at the top of each limb: l/r shoulder, l/r hip."""

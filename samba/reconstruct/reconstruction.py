@@ -26,12 +26,10 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Protocol
 
 import numpy as np
 
-from samba.body.alignment import Alignment, has_heading
-from samba.body.skeleton import N_JOINTS, N_MARKERS, markers_of, standard_pose
+from samba.body import N_JOINTS, N_MARKERS, Alignment, has_heading, markers_of, standard_pose
 from samba.reconstruct.local_space import (
     POSE_DIMS,
     EnergyTerms,
@@ -40,23 +38,9 @@ from samba.reconstruct.local_space import (
     initial_weights,
     solve_lm,
 )
+from samba.reconstruct.neighbours import NeighbourSource
 from samba.reconstruct.part_retrieval import refine_with_parts
 from samba.reconstruct.pseudo_poses import AngleNoise, pseudo_poses
-
-
-class NeighbourSource(Protocol):
-    """Anything with a k-nearest-pose query over a pose array, e.g. `samba.db.index.PoseIndex`."""
-
-    poses: np.ndarray
-    """(n, 13, 3) database poses, meters."""
-    scale_by_tibia: bool
-    """Whether the query compares tibia-normalised markers (`samba.body.alignment`)."""
-
-    def query(
-        self, markers: np.ndarray, k: int = 10, eps: float = 0.0
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(distances, row indices), each (b, k), of markers (b, 8, 3) with NaN = missing."""
-        ...
 
 
 @dataclass(frozen=True)

@@ -1,3 +1,31 @@
 """Single-camera markerless capture (Okada, Stenger, Kondoh): silhouettes extracted from
-video, the shape tree of rendered database poses, and the tree-based tracker.
+video, silhouettes of the body model rendered for database poses, the shape tree built
+from them, and the tree-based Bayesian tracker.
 """
+
+
+from samba.silhouette.distance import downsampled
+from samba.silhouette.evaluation import staged
+from samba.silhouette.extraction import BACKGROUND_METHODS, SilhouetteExtractor
+from samba.silhouette.person_render import person_frames, stage_background
+from samba.silhouette.render import noisy_silhouettes, render_silhouettes
+from samba.silhouette.runs import SilhouetteRuns
+from samba.silhouette.shape_tree import ShapeTree, TreeLevel
+from samba.silhouette.tracker import SilhouetteTracker
+from samba.silhouette.view import SilhouetteView
+
+__all__ = [
+    "BACKGROUND_METHODS",
+    "ShapeTree",
+    "SilhouetteExtractor",
+    "SilhouetteRuns",
+    "SilhouetteTracker",
+    "SilhouetteView",
+    "TreeLevel",
+    "downsampled",
+    "noisy_silhouettes",
+    "person_frames",
+    "render_silhouettes",
+    "stage_background",
+    "staged",
+]

@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 from scipy import sparse
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 DISTANCES: tuple[str, ...] = ("xor", "core", "normalised")
 """The silhouette distances: plain XOR (Eq. 4), core-weighted XOR (Eq. 5-6) and the

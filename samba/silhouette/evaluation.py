@@ -23,14 +23,14 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from samba.body.body_model import BodyModel, scaled_to
+from samba.body import BodyModel, scaled_to
 from samba.silhouette.distance import DISTANCES
 from samba.silhouette.extraction import clean_silhouette, tracking_close_px
 from samba.silhouette.render import noisy_silhouettes, render_silhouettes
 from samba.silhouette.shape_tree import ShapeTree
 from samba.silhouette.tracker import SilhouetteTracker, TrackerSettings
 from samba.silhouette.view import SilhouetteView
-from samba.synthetic.motions import generate
+from samba.synthetic import generate
 
 FAILURE_CM = 15.0
 """A frame whose MPJPE (cm, tibia 45 cm) exceeds this is a tracking failure."""

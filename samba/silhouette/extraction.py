@@ -39,7 +39,7 @@ from typing import Protocol
 import cv2
 import numpy as np
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 BACKGROUND_METHODS: tuple[str, ...] = ("colour", "mog2", "knn")
 """Background models `learn_background` knows: the paper's normalised-colour Gaussian,

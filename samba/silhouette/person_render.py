@@ -12,8 +12,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from samba.body.body_model import BodyModel
-from samba.cameras.camera import Camera
+from samba.body import BodyModel
+from samba.cameras import Camera
 from samba.silhouette.render import render_part_labels
 
 PART_COLOURS = np.array(

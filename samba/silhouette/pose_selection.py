@@ -13,9 +13,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from samba.base.errors import InputError
-from samba.body.body_model import checked_poses
-from samba.body.skeleton import BONES, N_JOINTS
+from samba.base import InputError
+from samba.body import BONES, N_JOINTS, checked_poses
 
 _LIMB_NAMES: tuple[str, ...] = (
     "left upper arm",

@@ -29,9 +29,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from samba.base.errors import InputError
-from samba.body.body_model import CAPSULE_PARTS, PART_NAMES, BodyModel, checked_poses
-from samba.cameras.camera import Camera
+from samba.base import InputError
+from samba.body import CAPSULE_PARTS, PART_NAMES, BodyModel, checked_poses
+from samba.cameras import Camera
 from samba.silhouette.runs import run_pixels
 
 NEAR = 0.05

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from samba.base.errors import InputError
+from samba.base import InputError
 from samba.silhouette.distance import SilhouetteWeights
 
 

@@ -36,9 +36,9 @@ from itertools import pairwise
 import numpy as np
 from scipy.spatial import cKDTree
 
-from samba.base.errors import InputError
-from samba.body.body_model import BodyModel, scaled_to
-from samba.cameras.synthetic_cameras import with_size
+from samba.base import InputError
+from samba.body import BodyModel, scaled_to
+from samba.cameras import with_size
 from samba.silhouette.distance import downsampled
 from samba.silhouette.pose_selection import distinct_poses, turned
 from samba.silhouette.render import part_visibility, render_silhouettes

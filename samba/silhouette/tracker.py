@@ -79,7 +79,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import logsumexp
 
-from samba.base.errors import InputError
+from samba.base import InputError
 from samba.silhouette.distance import (
     DISTANCES,
     SilhouetteWeights,

@@ -30,9 +30,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from samba.base.errors import InputError
-from samba.cameras.camera import Camera
-from samba.cameras.synthetic_cameras import with_size
+from samba.base import InputError
+from samba.cameras import Camera, with_size
 
 VIEW_SIZE = (320, 240)
 """(width, height) of the normalised silhouette images: the finest level of the tree."""

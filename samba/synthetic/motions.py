@@ -23,8 +23,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.spatial.transform import Rotation
 
-from samba.body.skeleton import N_JOINTS, Body
-from samba.body.take import Take
+from samba.body import N_JOINTS, Body, Take
 
 MOTIONS: tuple[str, ...] = (
     "walk",

@@ -1,3 +1,22 @@
-"""Multi-camera volumetric capture (Chu, Jenkins, Mataric): visual-hull voxels, Isomap,
-spherical shells, a kinematic model common to the sequence, joint angles.
+"""Multi-camera volumetric capture (Chu, Jenkins, Mataric): visual-hull voxels from
+calibrated silhouettes, Isomap and spherical shells per frame, one kinematic model for the
+whole sequence, its joint angles, and the 13 joints of a humanoid capture.
 """
+
+
+from samba.volume.capture import MIN_VOXELS, KinematicMotion, VolumeCapture, capture_volumes
+from samba.volume.frame_kinematics import HUMAN_END_BRANCHES
+from samba.volume.humanoid import humanoid_joints
+from samba.volume.visual_hull import VisualHull
+from samba.volume.voxel_grid import VoxelGrid
+
+__all__ = [
+    "HUMAN_END_BRANCHES",
+    "MIN_VOXELS",
+    "KinematicMotion",
+    "VisualHull",
+    "VolumeCapture",
+    "VoxelGrid",
+    "capture_volumes",
+    "humanoid_joints",
+]

@@ -17,8 +17,8 @@ from functools import cached_property
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from samba.base.errors import InputError
-from samba.body.segments import segment_distances
+from samba.base import InputError
+from samba.body import segment_distances
 from samba.volume.voxel_grid import VoxelGrid
 
 BEND_RANGE_DEG = (35.0, 65.0)

@@ -21,8 +21,8 @@ import numpy as np
 from scipy.signal import butter, filtfilt
 from scipy.spatial.transform import Rotation
 
-from samba.base.errors import InputError
-from samba.body.kinematics import continuous_quaternions, forward_kinematics, unit_vectors
+from samba.base import InputError
+from samba.body import continuous_quaternions, forward_kinematics, unit_vectors
 from samba.volume.frame_kinematics import SKEWNESS, FrameModel, frame_model
 from samba.volume.isomap import LANDMARKS, VoxelGraph, isomap
 from samba.volume.sequence_model import SequenceFit, fit_sequence

@@ -21,10 +21,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from samba.body.body_model import CAPSULE_NAMES, CAPSULE_PARTS, PART_NAMES, BodyModel, scaled_to
-from samba.body.segments import segment_distances
-from samba.markers.observation import mean_facing
-from samba.synthetic.motions import generate
+from samba.body import (
+    CAPSULE_NAMES,
+    CAPSULE_PARTS,
+    PART_NAMES,
+    BodyModel,
+    mean_facing,
+    scaled_to,
+    segment_distances,
+)
+from samba.synthetic import generate
 from samba.volume.articulated_figure import ArticulatedFigure, creature_motion
 from samba.volume.capture import CaptureSettings, VolumeCapture, capture_volumes
 from samba.volume.frame_kinematics import HUMAN_END_BRANCHES

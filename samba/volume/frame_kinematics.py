@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from samba.body.segments import point_segment_distances
+from samba.body import point_segment_distances
 from samba.volume.spherical_shells import SkeletonCurve
 
 SKEWNESS = 0.0

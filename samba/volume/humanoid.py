@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from samba.base.errors import InputError
-from samba.body.skeleton import N_JOINTS
+from samba.base import InputError
+from samba.body import N_JOINTS
 from samba.volume.frame_kinematics import HUMAN_END_BRANCHES, arc_lengths, points_along
 from samba.volume.sequence_model import SequenceFit
 

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 LANDMARKS = 48
 """Landmarks of the embedding by default; 3-D needs >= 4, the shape needs a few dozen."""

@@ -49,8 +49,8 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.stats import gaussian_kde
 
-from samba.base.errors import InputError
-from samba.body.segments import point_segment_distances
+from samba.base import InputError
+from samba.body import point_segment_distances
 from samba.volume.frame_kinematics import Branch, FrameModel, arc_lengths, points_along
 
 RESAMPLE = np.linspace(0.0, 1.0, 6)

@@ -20,7 +20,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from samba.base.errors import InputError
+from samba.base import InputError
 from samba.volume.isomap import Embedding, VoxelGraph
 
 

@@ -14,10 +14,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from samba.base.errors import InputError
-from samba.body.body_model import BodyModel
-from samba.cameras.camera import Camera, CameraGroup
-from samba.silhouette.render import noisy_silhouettes, render_silhouettes
+from samba.base import InputError
+from samba.body import BodyModel
+from samba.cameras import Camera, CameraGroup
+from samba.silhouette import noisy_silhouettes, render_silhouettes
 from samba.volume.voxel_grid import VoxelGrid
 
 OUTSIDE = -1

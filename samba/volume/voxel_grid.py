@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from samba.base.errors import InputError
+from samba.base import InputError
 
 
 def _vector(source: str, value: Sequence[float] | np.ndarray) -> np.ndarray:

@@ -27,10 +27,10 @@ length to the subject's, so the avatar's feet stay on the floor and its steps ma
 from __future__ import annotations
 
 import numpy as np
+
+from samba.body import N_JOINTS
 from samba.export.humanoid import CAPTURE_JOINT, N_BONES, PARENTS, HumanoidRig
 from samba.export.motion import HumanoidMotion
-
-from samba.body.skeleton import N_JOINTS
 
 MEASURED_BONES: tuple[tuple[str, int, int], ...] = (
     ("spine", 0, 3),
