@@ -3,8 +3,9 @@
 Layout of a store directory:
 
 * `catalog.sqlite`: the catalog (`samba.db.catalog`): a row per take and the committed state.
-* `poses-<name>.f32`: every pose as float32 rows of 13 x 3 meters, memory-mapped.
-* `rows-<name>.i32`: per pose row, int32 (take id, frame number).
+* `poses-<name>.f32`, `rows-<name>.i32`: the pose data files (`samba.db.pose_files`):
+  every pose as float32 rows of 13 x 3 meters, memory-mapped, and per row its take id
+  and frame number.
 * `index.npz`: the prebuilt k-d tree index (`samba.db.index`), tagged with the generation.
 
 Writers hold an exclusive `flock` on `lock`. An import appends pose rows past the
@@ -20,7 +21,6 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
-import hashlib
 import json
 import os
 import sqlite3
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from samba.body import N_JOINTS, Take, mirror_poses
+from samba.body import Take, mirror_poses
 from samba.db.catalog import (
     FORMAT,
     SCHEMA,
@@ -44,14 +44,22 @@ from samba.db.catalog import (
 )
 from samba.db.errors import StoreCorruptedError, StoreError
 from samba.db.index import PoseIndex
+from samba.db.pose_files import (
+    DATA_PREFIXES,
+    append_rows,
+    checksum,
+    data_files,
+    fsync_dir,
+    fsync_file,
+    map_committed,
+    write_compacted,
+)
 
 CATALOG = "catalog.sqlite"
 INDEX = "index.npz"
-POSE_BYTES = N_JOINTS * 3 * 4
 MAX_COORDINATE_M = 10_000.0
 """Largest joint coordinate (meters) sound pose data holds; beyond it (or NaN) the data
 file is damaged (`PoseStore.check_poses`)."""
-ROW_BYTES = 2 * 4
 
 
 @dataclass(frozen=True)
@@ -140,11 +148,11 @@ class PoseStore:
             conn.executemany("INSERT INTO state VALUES (?, ?)", state.items())
         finally:
             conn.close()
-        for name in ("poses-0.f32", "rows-0.i32"):
-            (path / name).touch()
-        _fsync_file(tmp)
+        for file in data_files(path, "0"):
+            file.touch()
+        fsync_file(tmp)
         os.replace(tmp, path / CATALOG)
-        _fsync_dir(path)
+        fsync_dir(path)
         return cls(path)
 
     @classmethod
@@ -185,19 +193,8 @@ class PoseStore:
             conn.close()
         if state.get("format") != FORMAT:
             raise StoreError(str(self.path), f"unknown store format {state.get('format')!r}")
-        n = int(state["n_poses"])
         name = state["data_name"]
-        poses_file = self.path / f"poses-{name}.f32"
-        rows_file = self.path / f"rows-{name}.i32"
-        for file, size in ((poses_file, POSE_BYTES), (rows_file, ROW_BYTES)):
-            if file.stat().st_size < n * size:
-                raise StoreError(str(file), f"shorter than the {n} committed poses: damaged")
-        if n:
-            self.poses = np.memmap(poses_file, dtype=np.float32, mode="r", shape=(n, N_JOINTS, 3))
-            rows = np.memmap(rows_file, dtype=np.int32, mode="r", shape=(n, 2))
-        else:
-            self.poses = np.empty((0, N_JOINTS, 3), dtype=np.float32)
-            rows = np.empty((0, 2), dtype=np.int32)
+        self.poses, rows = map_committed(self.path, name, int(state["n_poses"]))
         self.take_ids = rows[:, 0]
         self.frames = rows[:, 1]
         self.takes = takes
@@ -249,7 +246,7 @@ class PoseStore:
             sound = np.abs(poses) <= MAX_COORDINATE_M  # False for NaN
         if not sound.all():
             raise StoreError(
-                str(self.path / f"poses-{self.data_name}.f32"),
+                str(data_files(self.path, self.data_name)[0]),
                 f"{what} damaged: {np.count_nonzero(~sound)} values NaN, infinite or beyond "
                 f"{MAX_COORDINATE_M:g} m; run `samba db verify {self.path}`",
             )
@@ -382,9 +379,9 @@ class PoseStore:
         return self.takes + read_takes(conn, after_id=last)
 
     def _remove_orphans(self, state: dict[str, str]) -> None:
-        current = {f"poses-{state['data_name']}.f32", f"rows-{state['data_name']}.i32"}
+        current = {p.name for p in data_files(self.path, state["data_name"])}
         for p in self.path.iterdir():
-            stale_data = p.name.startswith(("poses-", "rows-")) and p.name not in current
+            stale_data = p.name.startswith(DATA_PREFIXES) and p.name not in current
             if stale_data or p.name.startswith((".index-", f".{CATALOG}.")):
                 p.unlink(missing_ok=True)
 
@@ -450,7 +447,7 @@ class PoseStore:
                         len(data),
                         take.source_frames,
                         first,
-                        _checksum(data),
+                        checksum(data),
                         json.dumps(take.meta),
                         json.dumps(take.warnings),
                         now,
@@ -458,31 +455,9 @@ class PoseStore:
                 )
                 ids.append(int(cur.lastrowid))
                 first += len(data)
-            self._append_rows(n, variants, ids, frames)
+            append_rows(self.path, self.data_name, n, [d for d, _ in variants], ids, frames)
             conn.execute("UPDATE state SET value = ? WHERE key = 'n_poses'", (str(first),))
         return ids
-
-    def _append_rows(
-        self,
-        n: int,
-        variants: list[tuple[np.ndarray, bool]],
-        ids: list[int],
-        frames: np.ndarray,
-    ) -> None:
-        poses_file = self.path / f"poses-{self.data_name}.f32"
-        rows_file = self.path / f"rows-{self.data_name}.i32"
-        with open(poses_file, "r+b") as pf, open(rows_file, "r+b") as rf:
-            pf.truncate(n * POSE_BYTES)
-            rf.truncate(n * ROW_BYTES)
-            pf.seek(n * POSE_BYTES)
-            rf.seek(n * ROW_BYTES)
-            for (data, _), take_id in zip(variants, ids, strict=True):
-                pf.write(np.ascontiguousarray(data, dtype=np.float32).tobytes())
-                rows = np.stack([np.full(len(data), take_id), frames], axis=1)
-                rf.write(rows.astype(np.int32).tobytes())
-            for fh in (pf, rf):
-                fh.flush()
-                os.fsync(fh.fileno())
 
     def remove(self, refs: Sequence[int | str]) -> list[int]:
         """Delete takes by id or name (a take's mirror goes with it); returns the ids
@@ -496,7 +471,8 @@ class PoseStore:
                 raise StoreError(str(self.path), f"takes {sorted(missing)} were removed meanwhile")
             keep = [t for t in takes if t.id not in targets]
             name = str(int(read_state(conn)["data_name"]) + 1)
-            total = self._write_compacted(name, keep)
+            rows = np.stack([self.take_ids, self.frames], axis=1)
+            total = write_compacted(self.path, name, self.poses, rows, [t.rows for t in keep])
             first = 0
             for t in keep:
                 conn.execute("UPDATE takes SET first_row = ? WHERE id = ?", (first, t.id))
@@ -509,22 +485,6 @@ class PoseStore:
         if len(self):
             self.build_index()
         return sorted(targets)
-
-    def _write_compacted(self, name: str, keep: list[TakeInfo]) -> int:
-        poses_file = self.path / f"poses-{name}.f32"
-        rows_file = self.path / f"rows-{name}.i32"
-        rows = np.stack([self.take_ids, self.frames], axis=1)
-        total = 0
-        with open(poses_file, "wb") as pf, open(rows_file, "wb") as rf:
-            for t in keep:
-                pf.write(np.ascontiguousarray(self.poses[t.rows.start : t.rows.stop]).tobytes())
-                rf.write(np.ascontiguousarray(rows[t.rows.start : t.rows.stop]).tobytes())
-                total += t.frame_count
-            for fh in (pf, rf):
-                fh.flush()
-                os.fsync(fh.fileno())
-        _fsync_dir(self.path)
-        return total
 
     def label(
         self,
@@ -578,7 +538,7 @@ class PoseStore:
             if len(data) != t.frame_count:
                 report.problems.append(f"take {t.id}: rows beyond the end of the data file")
                 continue
-            if _checksum(data) != t.checksum:
+            if checksum(data) != t.checksum:
                 report.problems.append(f"take {t.id} ({t.name}): pose data checksum mismatch")
             if not np.isfinite(data).all():
                 report.problems.append(f"take {t.id} ({t.name}): NaN or infinite poses")
@@ -621,19 +581,3 @@ class _DuplicateError(Exception):
     def __init__(self, take_id: int) -> None:
         super().__init__(take_id)
         self.take_id = take_id
-
-
-def _checksum(data: np.ndarray) -> str:
-    return hashlib.sha256(np.ascontiguousarray(data, dtype=np.float32).tobytes()).hexdigest()
-
-
-def _fsync_file(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def _fsync_dir(path: Path) -> None:
-    _fsync_file(path)

@@ -1,6 +1,6 @@
 """Shared fixtures: the real CMU data (skipped with a reason where absent), the
-synthetic stage of the live service tests, and the small shape tree of the silhouette
-tests."""
+synthetic stage of the live service tests, the small shape tree of the silhouette
+tests, and the pose-store tests' store of three takes."""
 
 from __future__ import annotations
 
@@ -9,8 +9,10 @@ from pathlib import Path
 
 import pytest
 from silhouette_fixtures import SmallBuild, build_small_tree
+from store_fixtures import make_take
 
 from samba.cameras.calibration_file import write_calibration
+from samba.db.store import PoseStore
 from samba.db.synthetic_store import build_synthetic_store
 from samba.service.synthetic_capture import SyntheticCapture
 from samba.silhouette.shape_tree import ShapeTree
@@ -79,3 +81,19 @@ def small_build() -> SmallBuild:
 def small_tree() -> ShapeTree:
     """The small tree of `silhouette_fixtures`."""
     return build_small_tree().tree
+
+
+@pytest.fixture
+def path(tmp_path: Path) -> Path:
+    """Where the test's store lives (not created yet)."""
+    return tmp_path / "store"
+
+
+@pytest.fixture
+def store(path: Path) -> PoseStore:
+    """A store with three takes: a (30 poses), b (20), c (25)."""
+    s = PoseStore.create(path)
+    s.add(make_take("a", 30, seed=1))
+    s.add(make_take("b", 20, seed=2))
+    s.add(make_take("c", 25, seed=3))
+    return s

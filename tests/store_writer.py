@@ -23,6 +23,7 @@ import numpy as np
 from samba.body.perturb import perturb_joint_angles
 from samba.body.skeleton import Body
 from samba.body.take import Take
+from samba.db import store as store_module
 from samba.db.store import INDEX, PoseStore
 
 PLAN_LENGTH = 3000
@@ -153,9 +154,9 @@ def _die_after(method: Callable[..., object]) -> Callable[..., object]:
 def install_die_point(point: str) -> None:
     """Make this process SIGKILL itself the first time the write reaches `point`."""
     if point == "append":
-        PoseStore._append_rows = _die_after(PoseStore._append_rows)  # type: ignore[method-assign]
+        store_module.append_rows = _die_after(store_module.append_rows)
     elif point == "compact":
-        PoseStore._write_compacted = _die_after(PoseStore._write_compacted)  # type: ignore[method-assign]
+        store_module.write_compacted = _die_after(store_module.write_compacted)
     elif point == "index":
         PoseStore.build_index = lambda self: _die()  # type: ignore[method-assign,assignment,return-value]
     elif point == "save":

@@ -34,7 +34,8 @@ from store_writer import (
 
 from samba.body.skeleton import markers_of, mirror_poses
 from samba.db.index import PoseIndex
-from samba.db.store import INDEX, POSE_BYTES, ROW_BYTES, PoseStore
+from samba.db.pose_files import POSE_BYTES, ROW_BYTES
+from samba.db.store import INDEX, PoseStore
 
 ROOT = Path(__file__).resolve().parents[1]
 WRITER = Path(__file__).with_name("store_writer.py")
