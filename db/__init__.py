@@ -3,7 +3,6 @@ k-nearest index (`PoseIndex`), and the silhouette shape trees saved beside the p
 Foreign file formats are `samba.ingest`'s business.
 """
 
-
 from samba.db.errors import QueryError, StoreCorruptedError, StoreError
 from samba.db.index import PoseIndex
 from samba.db.shape_tree_file import read_shape_tree, stored_tree, tree_path, write_shape_tree

@@ -3,11 +3,12 @@ user's USD / glTF / VRM avatar), live for VMC and offline for takes, and the USD
 and BVH writers (`samba export`).
 """
 
-
 from samba.export.avatar_file import read_avatar_rig
 from samba.export.bvh_writer import UNITS, BvhSkeleton, write_bvh_motion
+from samba.export.gltf_writer import write_glb
 from samba.export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
 from samba.export.live_retarget import LiveRetarget, retarget_together
+from samba.export.mannequin import mannequin
 from samba.export.motion import HumanoidMotion
 from samba.export.outputs import load_avatar, write_export
 from samba.export.retargeting import retarget
@@ -21,9 +22,11 @@ __all__ = [
     "HumanoidRig",
     "LiveRetarget",
     "load_avatar",
+    "mannequin",
     "read_avatar_rig",
     "retarget",
     "retarget_together",
     "write_bvh_motion",
     "write_export",
+    "write_glb",
 ]

@@ -2,7 +2,6 @@
 (rig mapping, unit and up-axis detection, resampling), and batch import into a pose store.
 """
 
-
 from samba.ingest.batch import FileResult, expand_paths, import_paths
 from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take

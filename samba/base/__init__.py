@@ -3,7 +3,6 @@
 command-line argument types the `samba` subcommands share.
 """
 
-
 from samba.base.arguments import (
     address,
     bind_address,

@@ -3,7 +3,6 @@ standard pose (`skeleton`), forward kinematics, the canonical alignment of marke
 line-segment distances, and the capsule body model of the markerless modes.
 """
 
-
 from samba.body.alignment import Alignment, align_markers, has_heading
 from samba.body.body_model import (
     CAPSULE_NAMES,

@@ -3,7 +3,6 @@
 a camera (image folders, videos), and triangulation.
 """
 
-
 from samba.cameras.calibration import WORLDS
 from samba.cameras.calibration_board import BOARD_SPEC_HELP, parse_board
 from samba.cameras.calibration_file import read_calibration, write_calibration

@@ -3,7 +3,6 @@ by every method, errors per joint and per take in cm at a 45 cm tibia, text repo
 JSON document and plots (`samba eval`).
 """
 
-
 from samba.evaluation.experiment import (
     Evaluation,
     document,

@@ -3,8 +3,7 @@ tracking, cross-view and leg labelling, stage tracking and the search for the st
 pose, plus the synthetic marker cameras (rendering, the observation model, lead-in).
 """
 
-
-from samba.markers.camera_chain import EMPTY_STAGE_FRAMES
+from samba.markers.camera_chain import EMPTY_STAGE_FRAMES, run_chain
 from samba.markers.cross_view_labels import CrossViewSettings
 from samba.markers.detection import detect_markers, static_mask
 from samba.markers.lead_in import LeadIn, standing_lead_in
@@ -32,6 +31,7 @@ __all__ = [
     "new_user_factors",
     "observe_markers",
     "render_camera",
+    "run_chain",
     "scale_limbs",
     "spread_cameras",
     "standing_lead_in",

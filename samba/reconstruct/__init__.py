@@ -3,7 +3,6 @@ pose space, energy solve) and our joint-specific part retrieval, with the named 
 presets (`nn`, `chai`, `samba`, `best`). The pose database comes in as a `NeighbourSource`.
 """
 
-
 from samba.reconstruct.methods import METHODS, Method, method
 from samba.reconstruct.neighbours import NeighbourSource
 from samba.reconstruct.reconstruction import (

@@ -3,7 +3,6 @@ video, silhouettes of the body model rendered for database poses, the shape tree
 from them, and the tree-based Bayesian tracker.
 """
 
-
 from samba.silhouette.distance import downsampled
 from samba.silhouette.evaluation import staged
 from samba.silhouette.extraction import BACKGROUND_METHODS, SilhouetteExtractor

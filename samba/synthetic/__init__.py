@@ -2,7 +2,6 @@
 the pose database when no real motion capture is there.
 """
 
-
 from samba.synthetic.motions import MOTIONS, generate, library
 
 __all__ = [

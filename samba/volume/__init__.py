@@ -3,7 +3,6 @@ calibrated silhouettes, Isomap and spherical shells per frame, one kinematic mod
 whole sequence, its joint angles, and the 13 joints of a humanoid capture.
 """
 
-
 from samba.volume.capture import MIN_VOXELS, KinematicMotion, VolumeCapture, capture_volumes
 from samba.volume.frame_kinematics import HUMAN_END_BRANCHES
 from samba.volume.humanoid import humanoid_joints
