@@ -37,7 +37,7 @@ from samba.export import cli as export_cli
 from samba.ingest import cli as import_cli
 from samba.ingest import expand_paths, load_bvh_take
 from samba.reconstruct import METHODS, method
-from samba.service import capture_volume_cli, demo, node_cli, serve_cli, track_video_cli
+from samba.service.cli import capture_volume, demo, node, serve, track_video
 
 
 def _register_db(parser: argparse.ArgumentParser) -> None:
@@ -258,18 +258,18 @@ AREAS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], str]] = {
         export_cli.register,
         "retarget takes to a humanoid avatar and write USD, glTF or BVH",
     ),
-    "serve": (serve_cli.register, "live capture server: packets in; VMC, viewer, takes out"),
+    "serve": (serve.register, "live capture server: packets in; VMC, viewer, takes out"),
     "demo": (demo.register, "a live capture end to end: server, two camera nodes, take, export"),
     "node": (
-        node_cli.register,
+        node.register,
         "camera node: track the 8 markers (or, markerless, the body) in frames, send them by UDP",
     ),
     "track-video": (
-        track_video_cli.register,
+        track_video.register,
         "markerless capture from one camera: silhouettes tracked over the shape tree, as a take",
     ),
     "capture-volume": (
-        capture_volume_cli.register,
+        capture_volume.register,
         "model-free capture from several cameras: visual hull, derived skeleton, BVH",
     ),
 }

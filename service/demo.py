@@ -15,18 +15,17 @@
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import os
 import sys
 import tempfile
 import time
 import webbrowser
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from samba.base import address, positive_float
 from samba.cameras import write_calibration
 from samba.db import PoseStore, build_synthetic_store
 from samba.export import load_avatar, retarget, write_export
@@ -44,63 +43,48 @@ DRAIN_S = 10.0
 """How long the demo waits, after the last packet, for the server to finish the frames."""
 
 
-def register(parser: argparse.ArgumentParser) -> None:
-    """Add the demo's flags to `parser`."""
-    parser.add_argument("--out", help="folder for the database, take and exports (default: temp)")
-    parser.add_argument("--db", help="use this pose store instead of building one")
-    parser.add_argument(
-        "--motion",
-        type=_motion,
-        default="walk",
-        help=f"built-in motion ({', '.join(MOTIONS)}) or a BVH file to play (default: walk)",
-    )
-    parser.add_argument("--seconds", type=positive_float, default=8.0, help="capture length")
-    parser.add_argument("--fps", type=positive_float, default=60.0, help="camera frame rate")
-    parser.add_argument(
-        "--vmc",
-        type=address,
-        default=("127.0.0.1", MARIONETTE_PORT),
-        metavar="HOST:PORT",
-        help=f"also stream VMC here (default 127.0.0.1:{MARIONETTE_PORT})",
-    )
-    parser.add_argument("--open", action="store_true", help="open the viewer in a browser")
-    parser.add_argument("--seed", type=int, default=0, help="random seed")
-    parser.set_defaults(run=run)
+@dataclass(frozen=True)
+class DemoSettings:
+    """What `run_demo` plays: `motion` (a built-in motion's name or a BVH file) for
+    `seconds` at `fps` camera frames per second; the pose store `db` (None: built from
+    the built-in motions); VMC also to `vmc` (host, port); files kept in `out` (None: a
+    temporary folder); the viewer opened in a browser when `open_viewer`; `seed` of the
+    database and the capture."""
+
+    motion: str = "walk"
+    seconds: float = 8.0
+    fps: float = 60.0
+    db: str | None = None
+    vmc: tuple[str, int] = ("127.0.0.1", MARIONETTE_PORT)
+    out: str | None = None
+    open_viewer: bool = False
+    seed: int = 0
 
 
-def _motion(value: str) -> str:
-    """`--motion`: a built-in motion's name or an existing file, checked before the demo
-    builds anything."""
-    if value in MOTIONS or Path(value).is_file():
-        return value
-    raise argparse.ArgumentTypeError(
-        f"{value!r} is neither a built-in motion ({', '.join(MOTIONS)}) nor a BVH file"
-    )
-
-
-def run(args: argparse.Namespace) -> int:
-    """Run the demo in `--out` or a temporary folder; prints what it did."""
-    if args.out:
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        return asyncio.run(_demo(Path(args.out), args))
+def run_demo(settings: DemoSettings) -> int:
+    """Run the demo in `settings.out` or a temporary folder, printing each step; returns
+    the exit status (0)."""
+    if settings.out:
+        Path(settings.out).mkdir(parents=True, exist_ok=True)
+        return asyncio.run(_demo(Path(settings.out), settings))
     with tempfile.TemporaryDirectory(prefix="samba-demo-") as folder:
-        return asyncio.run(_demo(Path(folder), args))
+        return asyncio.run(_demo(Path(folder), settings))
 
 
-async def _demo(folder: Path, args: argparse.Namespace) -> int:
+async def _demo(folder: Path, settings: DemoSettings) -> int:
     t0 = time.perf_counter()
-    if args.db:
-        store = PoseStore.open(args.db)
-        where = args.db
+    if settings.db:
+        store = PoseStore.open(settings.db)
+        where = settings.db
     else:
         where = folder / "store"
-        store = await asyncio.to_thread(build_synthetic_store, where, 3, 6.0, args.seed)
+        store = await asyncio.to_thread(build_synthetic_store, where, 3, 6.0, settings.seed)
     print(
         f"1. pose database: {len(store)} poses, {len(store.takes)} takes in {where} "
         f"({time.perf_counter() - t0:.1f} s)"
     )
 
-    capture, motion_name = _capture(args)
+    capture, motion_name = _capture(settings)
     calibration = folder / "cameras.toml"
     write_calibration(calibration, capture.cameras)
     counter = _VmcCounter()
@@ -109,8 +93,8 @@ async def _demo(folder: Path, args: argparse.Namespace) -> int:
             "name": SESSION,
             "calibration": str(calibration),
             "database": str(where),
-            "fps": args.fps,
-            "vmc": [f"{h}:{p}" for h, p in (args.vmc, counter.address)],
+            "fps": settings.fps,
+            "vmc": [f"{h}:{p}" for h, p in (settings.vmc, counter.address)],
         },
         "samba demo",
     )
@@ -122,14 +106,16 @@ async def _demo(folder: Path, args: argparse.Namespace) -> int:
         session = live.server.session(SESSION)
         viewer = f"{live.http_url}/viewer/{SESSION}"
         host, port = live.udp_address
-        print(f"2. server: camera packets on udp {host}:{port}; VMC -> {args.vmc[0]}:{args.vmc[1]}")
+        vmc_host, vmc_port = settings.vmc
+        print(f"2. server: camera packets on udp {host}:{port}; VMC -> {vmc_host}:{vmc_port}")
         print(f"   live viewer: {viewer}   control API: {live.http_url}/api/health")
-        if args.open and _has_display():
+        if settings.open_viewer and _has_display():
             webbrowser.open(viewer)
         take = session.start_take(f"demo_{motion_name}")
         print(
             f"3. two camera nodes play {capture.frames} frames of {motion_name} "
-            f"({capture.frames / args.fps:.1f} s at {args.fps:g} fps), recording take {take.name}"
+            f"({capture.frames / settings.fps:.1f} s at {settings.fps:g} fps), "
+            f"recording take {take.name}"
         )
         start_at = time.time() + 0.5
         counter.start()
@@ -153,18 +139,19 @@ def _all_out(session: CaptureSession, frames: int) -> bool:
     return done >= frames
 
 
-def _capture(args: argparse.Namespace) -> tuple[SyntheticCapture, str]:
+def _capture(settings: DemoSettings) -> tuple[SyntheticCapture, str]:
     """The motion the camera nodes play and its name: a built-in one (a seed the database
     never saw) or a BVH file, `--seconds` of it."""
-    if args.motion in MOTIONS:
+    if settings.motion in MOTIONS:
+        seed = 10_000 + settings.seed
         capture = SyntheticCapture.film(
-            args.motion, args.seconds, args.fps, dropout=0.02, seed=10_000 + args.seed
+            settings.motion, settings.seconds, settings.fps, dropout=0.02, seed=seed
         )
-        return capture, args.motion
-    path = Path(args.motion)
-    take = load_bvh_take(path, BvhImportOptions(fps=args.fps))
-    take.poses = take.poses[: round(args.seconds * args.fps)]
-    return SyntheticCapture.of_take(take, dropout=0.02, seed=args.seed), path.stem
+        return capture, settings.motion
+    path = Path(settings.motion)
+    take = load_bvh_take(path, BvhImportOptions(fps=settings.fps))
+    take.poses = take.poses[: round(settings.seconds * settings.fps)]
+    return SyntheticCapture.of_take(take, dropout=0.02, seed=settings.seed), path.stem
 
 
 def _report(

@@ -16,8 +16,9 @@ import asyncio
 import contextlib
 import ipaddress
 import os
+import signal
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from types import TracebackType
 
@@ -28,6 +29,7 @@ from samba.service.control_api import add_control_routes, token_middleware
 from samba.service.errors import ServiceError
 from samba.service.pipeline_workers import FrameDone, WorkerPipelines
 from samba.service.server import CaptureServer
+from samba.service.session import CaptureSession
 from samba.service.session_config import SessionConfig
 from samba.service.udp_input import UdpInput
 from samba.service.viewer import ViewerHub, add_viewer_routes
@@ -241,3 +243,32 @@ class LiveServer:
         if self.server is not None:
             self.server.tick(time.time())
             self._schedule()
+
+
+async def serve_until_stopped(
+    server: LiveServer,
+    record: str | None = None,
+    duration: float | None = None,
+    started: Callable[[LiveServer, list[CaptureSession]], None] | None = None,
+) -> tuple[dict, list]:
+    """Run `server` until SIGINT or SIGTERM, or for `duration` seconds. With `record`
+    every session records a take from the start (named `record`, or automatically when it
+    is ""). `started` is called once the server listens. Returns the server's metrics and
+    the takes recorded, once it has stopped and written them."""
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    async with server:
+        assert server.server is not None
+        sessions = list(server.server.sessions.values())
+        if record is not None:
+            for session in sessions:
+                session.start_take(record or None)
+        if started is not None:
+            started(server, sessions)
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), duration)
+        takes = [t for s in sessions for t in s.takes()]
+        metrics = server.server.metrics()
+    return metrics, takes

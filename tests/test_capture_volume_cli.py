@@ -255,7 +255,7 @@ def test_a_failure_writing_the_joints_leaves_no_bvh(
     def full_disk(path: Path) -> None:
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
-    monkeypatch.setattr("samba.service.capture_volume_cli.atomic_path", full_disk)
+    monkeypatch.setattr("samba.service.video_capture.atomic_path", full_disk)
     out, joints = tmp_path / "take.bvh", tmp_path / "take.npz"
     facing = [f"{value:.6f}" for value in stage.facing]
     flags = ("--empty-frames", EMPTY_FRAMES, "--joints", joints, "--facing", *facing)

@@ -8,7 +8,7 @@ from samba.cameras.calibration_board import BOARD_SPEC_HELP, parse_board
 from samba.cameras.calibration_file import read_calibration, write_calibration
 from samba.cameras.camera import Camera, CameraGroup
 from samba.cameras.frame_io import read_frames, write_video
-from samba.cameras.frame_source import FrameSource, open_frames, open_video
+from samba.cameras.frame_source import FrameSource, open_frames, open_video, sized_frames
 from samba.cameras.recordings import RecordingCalibration, calibrate_recordings
 from samba.cameras.synthetic_cameras import with_size
 from samba.cameras.triangulation import Triangulation, triangulate, triangulate_cameras
@@ -27,6 +27,7 @@ __all__ = [
     "parse_board",
     "read_calibration",
     "read_frames",
+    "sized_frames",
     "triangulate",
     "triangulate_cameras",
     "with_size",

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from samba.base import InputError
+from samba.cameras.camera import Camera
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 """File extensions (any case) read as images from a folder."""
@@ -109,6 +110,22 @@ def open_frames(path: str | Path) -> FrameSource:
     if not path.is_file():
         raise InputError(str(path), "no such file or folder")
     return FrameSource(path, ())
+
+
+def sized_frames(
+    frames: Iterator[tuple[int, np.ndarray]], source: str, camera: Camera, calibration: str
+) -> Iterator[tuple[int, np.ndarray]]:
+    """`frames` of `source`, checked to be of the image size of `camera` (of the file
+    `calibration`); InputError naming both otherwise."""
+    width, height = camera.size
+    for number, frame in frames:
+        if frame.shape[:2] != (height, width):
+            raise InputError(
+                source,
+                f"frames are {frame.shape[1]}x{frame.shape[0]} but camera {camera.name!r} "
+                f"of {calibration} takes {width}x{height} images",
+            )
+        yield number, frame
 
 
 def _natural_key(path: Path) -> list[object]:

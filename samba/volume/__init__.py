@@ -4,6 +4,7 @@ whole sequence, its joint angles, and the 13 joints of a humanoid capture.
 """
 
 from samba.volume.capture import MIN_VOXELS, KinematicMotion, VolumeCapture, capture_volumes
+from samba.volume.carving import Frames, carve_streams, learn_extractors
 from samba.volume.frame_kinematics import HUMAN_END_BRANCHES
 from samba.volume.humanoid import humanoid_joints
 from samba.volume.visual_hull import VisualHull
@@ -12,10 +13,13 @@ from samba.volume.voxel_grid import VoxelGrid
 __all__ = [
     "HUMAN_END_BRANCHES",
     "MIN_VOXELS",
+    "Frames",
     "KinematicMotion",
     "VisualHull",
     "VolumeCapture",
     "VoxelGrid",
     "capture_volumes",
+    "carve_streams",
     "humanoid_joints",
+    "learn_extractors",
 ]

@@ -15,43 +15,28 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import itertools
 import sys
-import time
-from collections.abc import Iterator
 
 import numpy as np
 
 from samba.base import InputError, address, finite_float, natural, positive_float
 from samba.body import KINDS, N_MARKERS
-from samba.cameras import Camera, open_frames, read_calibration
+from samba.cameras import read_calibration
 from samba.db import stored_tree
 from samba.db.cli import chosen_body, chosen_home
-from samba.service.node import (
-    DEFAULT_FPS,
-    DEFAULT_PORT,
-    CameraNode,
-    Capture,
-    FileFeed,
-    PacketSender,
-    SubjectStart,
-    SyntheticFeed,
-    WebcamFeed,
-    run_node,
-    synthetic_lead_in,
+from samba.service.node import DEFAULT_FPS, DEFAULT_PORT, PacketSender, SubjectStart, run_node
+from samba.service.node_sources import (
+    DEFAULT_SYNTHETIC_SECONDS,
+    SOURCES,
+    START_DELAY_SECONDS,
+    NodeSource,
+    open_marker_node,
+    open_silhouette_node,
 )
 from samba.service.packet import MIN_KEY_BYTES, MarkerPacket, read_key_file
-from samba.service.silhouette_node import SilhouetteNode, SyntheticStageFeed
-from samba.silhouette import SilhouetteExtractor, SilhouetteView
+from samba.silhouette import SilhouetteView
 from samba.synthetic import MOTIONS
 
-START_DELAY_SECONDS = 0.5
-"""How far ahead of now the synthetic capture starts when `--start-at` is not given."""
-DEFAULT_SYNTHETIC_SECONDS = 10.0
-"""Length of the synthetic motion (after the 1-s standing lead-in) by default."""
-
-SOURCES = ("video", "images", "webcam", "synthetic")
-"""The source flags, exactly one of which is given."""
 _SCOPES: dict[str, tuple[str, ...]] = {
     "seconds": ("synthetic",),
     "seed": ("synthetic",),
@@ -71,10 +56,6 @@ _MODE_FLAGS: dict[str, tuple[str, ...]] = {
     "silhouette": ("db", "tree", "body", "kind", "home", "background", "empty_frames"),
 }
 """Flags of one mode only."""
-EMPTY_STAGE_FRAMES = 10
-"""Frames of the synthetic stage the silhouette node learns the background from."""
-
-
 def register(parser: argparse.ArgumentParser) -> None:
     """Add the `node` arguments to `parser`."""
     parser.add_argument(
@@ -216,7 +197,7 @@ def register(parser: argparse.ArgumentParser) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    source = _source_of(args)
+    kind = _source_of(args)
     cameras = read_calibration(args.calib)
     if args.camera >= len(cameras):
         raise InputError(
@@ -224,13 +205,34 @@ def _run(args: argparse.Namespace) -> int:
             f"has {len(cameras)} cameras (ids 0..{len(cameras) - 1}); no camera {args.camera}",
         )
     camera = cameras[args.camera]
+    source = NodeSource(
+        kind,
+        getattr(args, kind),
+        args.fps,
+        pace=not args.no_pace,
+        loop=bool(args.loop),
+        seconds=args.seconds,
+        seed=args.seed,
+        start_at=args.start_at,
+    )
     key = read_key_file(args.key_file) if args.key_file is not None else None
     host, port = args.server
     with PacketSender(host, port, args.camera, args.session, key) as sender:
         if args.mode == "silhouette":
-            node, captures = _open_silhouette_source(args, source, camera)
+            view, body = SilhouetteView(camera, chosen_home(args)), chosen_body(args)
+            tree = stored_tree(args.db, args.tree, view, body)
+            node, captures = open_silhouette_node(
+                source, camera, tree, body, args.height, args.background, args.empty_frames
+            )
         else:
-            node, captures = _open_source(args, source, camera)
+            start = SubjectStart(
+                args.start_x or 0.0,
+                args.start_z or 0.0,
+                args.heading or 0.0,
+                args.height or SubjectStart.height,
+            )
+            threshold = args.threshold if args.threshold is not None else "auto"
+            node, captures = open_marker_node(source, camera, args.camera, threshold, start)
         with contextlib.closing(captures):
             summary = run_node(
                 node,
@@ -268,81 +270,6 @@ def _source_of(args: argparse.Namespace) -> str:
         if source != "synthetic" and (args.background is None) == (args.empty_frames is None):
             raise InputError("--mode silhouette", "give --background PATH or --empty-frames N")
     return source
-
-
-def _open_source(
-    args: argparse.Namespace, source: str, camera: Camera
-) -> tuple[CameraNode, Iterator[Capture]]:
-    """The camera node and the capture feed of the chosen source, opened."""
-    threshold = args.threshold if args.threshold is not None else "auto"
-    pace, loop = not args.no_pace, bool(args.loop)
-    if source == "synthetic":
-        fps = args.fps or DEFAULT_FPS
-        seconds = args.seconds or DEFAULT_SYNTHETIC_SECONDS
-        seed = args.seed or 0
-        try:
-            lead_in = synthetic_lead_in(args.synthetic, seconds, fps, seed)
-        except ValueError as exc:
-            raise InputError("--seconds", str(exc)) from None
-        start_at = args.start_at
-        if start_at is None:
-            start_at = time.time() + START_DELAY_SECONDS
-        feed = SyntheticFeed(camera, args.camera, lead_in, fps, seed, start_at, pace, loop)
-        return CameraNode(camera, SubjectStart.of(lead_in), feed.mask, threshold), feed.captures()
-    start = SubjectStart(
-        args.start_x or 0.0,
-        args.start_z or 0.0,
-        args.heading or 0.0,
-        args.height or SubjectStart.height,
-    )
-    node = CameraNode(camera, start, threshold=threshold)
-    if source == "webcam":
-        return node, WebcamFeed(args.webcam, args.fps).captures()
-    frames = open_frames(args.video if source == "video" else args.images)
-    if source == "video" and not frames.is_video:
-        raise InputError(args.video, "is a folder: use --images")
-    if source == "images" and frames.is_video:
-        raise InputError(args.images, "is a file: use --video")
-    return node, FileFeed(frames, args.fps, pace, loop).captures()
-
-
-def _open_silhouette_source(
-    args: argparse.Namespace, source: str, camera: Camera
-) -> tuple[SilhouetteNode, Iterator[Capture]]:
-    """The markerless node and the capture feed of the chosen source, opened."""
-    view, body = SilhouetteView(camera, chosen_home(args)), chosen_body(args)
-    tree = stored_tree(args.db, args.tree, view, body)
-    pace, loop = not args.no_pace, bool(args.loop)
-    if source == "synthetic":
-        fps = args.fps or DEFAULT_FPS
-        start_at = args.start_at if args.start_at is not None else time.time() + START_DELAY_SECONDS
-        feed = SyntheticStageFeed(
-            camera,
-            tree,
-            body,
-            args.synthetic,
-            args.seconds or DEFAULT_SYNTHETIC_SECONDS,
-            fps,
-            args.seed or 0,
-            start_at,
-            pace,
-            loop,
-        )
-        extractor = SilhouetteExtractor.for_tracking(
-            feed.empty_frames(EMPTY_STAGE_FRAMES), view.size[0]
-        )
-        return SilhouetteNode(tree, extractor), feed.captures()
-    if source == "webcam":
-        captures = WebcamFeed(args.webcam, args.fps).captures()
-    else:
-        frames = open_frames(args.video if source == "video" else args.images)
-        captures = FileFeed(frames, args.fps, pace, loop).captures()
-    if args.background is not None:
-        empty = [frame for _, frame in open_frames(args.background).frames()]
-    else:
-        empty = [capture.frame for capture in itertools.islice(captures, args.empty_frames)]
-    extractor = SilhouetteExtractor.for_tracking(empty, view.size[0])
-    return SilhouetteNode(tree, extractor, args.height), captures
 
 
 def _camera_id(text: str) -> int:

@@ -16,34 +16,31 @@ from __future__ import annotations
 
 import argparse
 import itertools
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from samba.base import InputError, atomic_path, finite_float, natural, positive, positive_float
-from samba.body import JOINT_NAMES
-from samba.cameras import CameraGroup, open_frames, read_calibration
-from samba.export import UNITS, BvhSkeleton, write_bvh_motion
-from samba.service.track_video_cli import sized_frames
+from samba.base import InputError, finite_float, natural, positive, positive_float
+from samba.cameras import CameraGroup, open_frames, read_calibration, sized_frames
+from samba.export import UNITS
+from samba.service.video_capture import write_volume_capture
 from samba.silhouette import BACKGROUND_METHODS, SilhouetteExtractor
 from samba.volume import (
     HUMAN_END_BRANCHES,
     MIN_VOXELS,
-    KinematicMotion,
+    Frames,
     VisualHull,
     VolumeCapture,
     VoxelGrid,
     capture_volumes,
+    carve_streams,
     humanoid_joints,
+    learn_extractors,
 )
 
 DEFAULT_BOUNDS = (-1.0, 0.0, -1.0, 1.0, 2.1, 1.0)
 """Capture volume (x0, y0, z0, x1, y1, z1) m: 2 x 2 m of floor, 2.1 m high."""
-
-Frames = Iterator[tuple[int, np.ndarray]]
-"""One camera's (frame number, BGR uint8 image (H, W, 3)) in order."""
-
 
 def register(parser: argparse.ArgumentParser) -> None:
     """Add the `capture-volume` arguments to `parser`."""
@@ -138,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
         for video, camera in zip(args.videos, cameras, strict=True)
     ]
     extractors = _extractors(args, streams, cameras)
-    first, volumes, counts = _carve(streams, extractors, VisualHull(grid, cameras), args.min_views)
+    hull = VisualHull(grid, cameras)
+    first, volumes, counts = carve_streams(streams, extractors, hull, args.min_views)
     if not volumes:
         raise InputError(
             ", ".join(args.videos),
@@ -150,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
     if joints_out is not None and capture.fit.model.branch_count == HUMAN_END_BRANCHES:
         facing = np.array([args.facing[0], 0.0, args.facing[1]])
         joints = humanoid_joints(capture.fit, facing)
-    _write(out, motion, args.unit, joints_out, joints)
+    write_volume_capture(out, motion, args.unit, joints_out, joints)
     note = ""
     if joints_out is not None and joints is None:
         note = (
@@ -209,76 +207,13 @@ def _extractors(
     background it comes from."""
     if args.background:
         _check_per_camera(args.background, "--background videos", cameras, args.calib)
-        sources = args.background
         stages = [
-            sized_frames(open_frames(source).frames(), source, camera, args.calib)
-            for source, camera in zip(sources, cameras, strict=True)
+            (source, sized_frames(open_frames(source).frames(), source, camera, args.calib))
+            for source, camera in zip(args.background, cameras, strict=True)
         ]
     else:
-        sources = args.videos
-        stages = [itertools.islice(stream, args.empty_frames) for stream in streams]
-    extractors = []
-    for source, stage in zip(sources, stages, strict=True):
-        empty = [frame for _, frame in stage]
-        try:
-            extractors.append(SilhouetteExtractor.learn(empty, method=args.method))
-        except InputError as exc:
-            raise InputError(source, f"{exc.source}: {exc.problem}") from None
-    return extractors
-
-
-def _carve(
-    streams: list[Frames],
-    extractors: list[SilhouetteExtractor],
-    hull: VisualHull,
-    min_views: int | None,
-) -> tuple[int, list[np.ndarray], list[int]]:
-    """The volumes (nx, ny, nz) bool of the frames read in lockstep from `streams` until
-    the shortest ends, from the first to the last with at least `MIN_VOXELS` voxels
-    (somebody in the volume), the frame number of the first of them, and each
-    volume's voxel count."""
-    first, volumes, counts = 0, [], []
-    for frames in zip(*streams, strict=False):
-        silhouettes = [
-            extractor.silhouette(frame)
-            for extractor, (_, frame) in zip(extractors, frames, strict=True)
+        stages = [
+            (video, itertools.islice(stream, args.empty_frames))
+            for video, stream in zip(args.videos, streams, strict=True)
         ]
-        volume = hull.carve(silhouettes, min_views)
-        count = int(volume.sum())
-        if not volumes:
-            if count < MIN_VOXELS:
-                continue  # nobody in the volume yet
-            first = frames[0][0]
-        volumes.append(volume)
-        counts.append(count)
-    while counts and counts[-1] < MIN_VOXELS:  # the subject has left
-        counts.pop()
-        volumes.pop()
-    return first, volumes, counts
-
-
-def _write(
-    out: Path,
-    motion: KinematicMotion,
-    unit: str,
-    joints_out: Path | None,
-    joints: np.ndarray | None,
-) -> None:
-    """Write `motion` to the BVH file `out` with lengths in `unit` (an End Site closing
-    each leaf link, its length in meters along the link's Z axis), then, when given,
-    `joints` (n, 13, 3) m to the archive `joints_out` (arrays `joints`, `names` (13,)
-    and `fps`). Both atomically; a failure leaves neither file."""
-    skeleton = BvhSkeleton(
-        motion.names,
-        motion.parents,
-        motion.offsets,
-        end_sites={leaf: np.array([0.0, 0.0, motion.lengths[leaf]]) for leaf in motion.leaves},
-    )
-    try:
-        write_bvh_motion(out, skeleton, motion.rotations, motion.root, motion.fps, unit)
-        if joints_out is not None and joints is not None:
-            with atomic_path(joints_out) as tmp, open(tmp, "wb") as file:
-                np.savez(file, joints=joints, names=np.array(JOINT_NAMES), fps=motion.fps)
-    except BaseException:
-        out.unlink(missing_ok=True)
-        raise
+    return learn_extractors(stages, args.method)

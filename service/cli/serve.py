@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
 import os
-import signal
 import sys
 from pathlib import Path
 
@@ -15,7 +13,14 @@ from threadpoolctl import threadpool_limits
 from samba.base import address, bind_address, natural, positive_float
 from samba.reconstruct import METHODS
 from samba.service.packet import read_key_file
-from samba.service.serve import CORES, HTTP_PORT, UDP_PORT, LiveServer, auto_workers
+from samba.service.serve import (
+    CORES,
+    HTTP_PORT,
+    UDP_PORT,
+    LiveServer,
+    auto_workers,
+    serve_until_stopped,
+)
 from samba.service.session import CaptureSession
 from samba.service.session_config import INPUTS, LABELLERS, SessionConfig, read_sessions
 
@@ -117,7 +122,10 @@ def run(args: argparse.Namespace) -> int:
     # Per-frame linear algebra is on 39 x 39 matrices: BLAS threads only contend with
     # the event loop (and each other) for the cores.
     with threadpool_limits(1):
-        asyncio.run(_serve(server, args.record, args.duration))
+        metrics, takes = asyncio.run(
+            serve_until_stopped(server, args.record, args.duration, started=_print_start)
+        )
+    _print_summary(metrics, takes)
     return 0
 
 
@@ -146,25 +154,6 @@ def _configs(args: argparse.Namespace) -> list[SessionConfig]:
         if value:
             values[key] = value
     return [SessionConfig.from_mapping(values, "--session")]
-
-
-async def _serve(server: LiveServer, record: str | None, duration: float | None) -> None:
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
-    async with server:
-        assert server.server is not None
-        sessions = list(server.server.sessions.values())
-        if record is not None:
-            for session in sessions:
-                session.start_take(record or None)
-        _print_start(server, sessions)
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(stop.wait(), duration)
-        takes = [t for s in sessions for t in s.takes()]
-        metrics = server.server.metrics()
-    _print_summary(metrics, takes)
 
 
 def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:

@@ -13,25 +13,20 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from samba.base import InputError, natural, positive_float
-from samba.body import N_MARKERS
-from samba.cameras import Camera, open_frames
+from samba.cameras import open_frames, sized_frames
 from samba.db import stored_tree
 from samba.db.cli import add_camera_arguments, chosen_body, chosen_camera, chosen_home
-from samba.reconstruct import PoseEstimate
-from samba.service.take_recorder import TakeRecorder
+from samba.service.video_capture import track_video
 from samba.silhouette import (
     BACKGROUND_METHODS,
     SilhouetteExtractor,
     SilhouetteTracker,
     SilhouetteView,
-    downsampled,
 )
 
 
@@ -81,7 +76,10 @@ def run(args: argparse.Namespace) -> int:
     tree = stored_tree(args.db, args.tree, view, chosen_body(args))
     tracker = SilhouetteTracker(tree, height=args.height)
     try:
-        seconds, held = _track(frames, extractor, tracker, out, args)
+        empty_stage = "--background" if args.background else f"--empty-frames {args.empty_frames}"
+        seconds, held = track_video(
+            frames, extractor, tracker, out, args.fps, args.video, empty_stage
+        )
     except BaseException:
         out.unlink(missing_ok=True)
         raise
@@ -94,62 +92,3 @@ def run(args: argparse.Namespace) -> int:
         f"shape tree of {len(tree.leaves):,} poses -> {out}"
     )
     return 0
-
-
-def _track(
-    frames: Iterator[tuple[int, np.ndarray]],
-    extractor: SilhouetteExtractor,
-    tracker: SilhouetteTracker,
-    out: Path,
-    args: argparse.Namespace,
-) -> tuple[list[float], int]:
-    """Track every frame of `args.video` from the first with somebody in view, writing
-    the take to `out` at `args.fps`; returns the seconds each tracked frame took and how
-    many held the pose. A silhouette the tracker cannot place (it does not stand on the
-    floor) raises InputError naming the video and the frame."""
-    size = tracker.tree.view.size
-    fps = args.fps
-    seconds, held = [], 0
-    with TakeRecorder(out, fps) as recorder:
-        for number, frame in frames:
-            start = time.perf_counter()
-            mask = extractor.silhouette(frame)
-            if not seconds and not mask.any():
-                continue  # nobody in view yet
-            if mask.shape != size[::-1]:
-                mask = downsampled(mask, size)
-            try:
-                estimate = tracker.step(mask)
-            except InputError as exc:
-                empty = "--background" if args.background else f"--empty-frames {args.empty_frames}"
-                raise InputError(
-                    args.video,
-                    f"frame {number}: the silhouette cannot be placed ({exc.problem}); is the "
-                    f"empty stage ({empty}) free of people and of the same view?",
-                ) from exc
-            seconds.append(time.perf_counter() - start)
-            held += not estimate.found
-            recorder.write_frame(
-                round(number / fps * 1e9),
-                PoseEstimate(
-                    estimate.pose, estimate.distance, 0, estimate.found, not estimate.found
-                ),
-                np.full((N_MARKERS, 3), np.nan),
-            )
-    return seconds, held
-
-
-def sized_frames(
-    frames: Iterator[tuple[int, np.ndarray]], source: str, camera: Camera, calibration: str
-) -> Iterator[tuple[int, np.ndarray]]:
-    """`frames` of `source`, checked to be of the image size of `camera` (of the file
-    `calibration`); InputError naming both otherwise."""
-    width, height = camera.size
-    for number, frame in frames:
-        if frame.shape[:2] != (height, width):
-            raise InputError(
-                source,
-                f"frames are {frame.shape[1]}x{frame.shape[0]} but camera {camera.name!r} "
-                f"of {calibration} takes {width}x{height} images",
-            )
-        yield number, frame
