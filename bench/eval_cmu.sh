@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The accuracy runs behind the README's and the closing notes' tables (EVALUATION.md):
+# The accuracy runs behind the manual's tables (docs/reconstruction.md; EVALUATION.md):
 # leave-one-take-out over ../shared/data/cmu, with 10% dropout, with new users, on the
 # held-out split, and the paper's K and N sweeps. Single-threaded (samba eval limits
 # BLAS to one thread); pinned to one core where taskset exists.

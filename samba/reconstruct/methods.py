@@ -31,7 +31,8 @@ BEST = ReconstructionConfig(
     min_bandwidth=0.002,
     eps=2.0,
 )
-"""Our best configuration, chosen by leave-one-take-out evaluation (see README)."""
+"""Our best configuration, chosen by leave-one-take-out evaluation
+(docs/design/reconstruction.md)."""
 
 
 @dataclass(frozen=True)

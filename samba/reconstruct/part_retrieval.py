@@ -6,9 +6,9 @@ chosen as much by the legs as by the arm; the elbow between them comes out 7-9 c
 Here each `Part` queries the pose index again with only its own markers (an elbow: both
 shoulders and its wrist; the hips: all but the wrists; the head: shoulders and knees),
 aligns the neighbours by those markers, and takes their kernel-weighted mean of the
-part's joints. The estimate is
-blended into the main one with the part's weight. Measured with `samba eval` (README):
-elbows 7-8 cm -> 5.5 cm, hips 4.2 -> 3.5 cm, head 2.3 -> 2.1 cm.
+part's joints. The estimate is blended into the main one with the part's weight.
+Measured with `samba eval` (docs/reconstruction.md): elbows 7-8 cm -> 5.5 cm, hips
+4.2 -> 3.5 cm, head 2.3 -> 2.1 cm.
 """
 
 from __future__ import annotations

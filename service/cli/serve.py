@@ -32,7 +32,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "to game engines and to the live viewer, and record takes on request."
     )
     one = parser.add_argument_group("one session from flags (or use --config)")
-    one.add_argument("--config", help="TOML file of [[session]] tables (see README)")
+    one.add_argument("--config", help="TOML file of [[session]] tables (see docs/live.md)")
     one.add_argument(
         "--input",
         choices=INPUTS,
