@@ -34,7 +34,29 @@ def track_video(
     tracked frame took and how many held the pose. A silhouette the tracker cannot place
     (it does not stand on the floor) raises InputError naming the video and the frame,
     and asking whether the empty stage (`empty_stage`, the flag that gave it) is free of
-    people."""
+    people; a video with nobody in any frame raises InputError naming it. A failure
+    leaves no take behind."""
+    try:
+        seconds, held = _track(frames, extractor, tracker, out, fps, video, empty_stage)
+    except BaseException:
+        out.unlink(missing_ok=True)
+        raise
+    if not seconds:
+        out.unlink(missing_ok=True)
+        raise InputError(video, "nobody was seen in any frame")
+    return seconds, held
+
+
+def _track(
+    frames: Iterator[tuple[int, np.ndarray]],
+    extractor: SilhouetteExtractor,
+    tracker: SilhouetteTracker,
+    out: Path,
+    fps: float,
+    video: str,
+    empty_stage: str,
+) -> tuple[list[float], int]:
+    """`track_video`'s frame loop, without the clean-up of `out` on failure."""
     size = tracker.tree.view.size
     seconds, held = [], 0
     with TakeRecorder(out, fps) as recorder:

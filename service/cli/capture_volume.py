@@ -42,6 +42,7 @@ from samba.volume import (
 DEFAULT_BOUNDS = (-1.0, 0.0, -1.0, 1.0, 2.1, 1.0)
 """Capture volume (x0, y0, z0, x1, y1, z1) m: 2 x 2 m of floor, 2.1 m high."""
 
+
 def register(parser: argparse.ArgumentParser) -> None:
     """Add the `capture-volume` arguments to `parser`."""
     parser.add_argument(

@@ -56,6 +56,8 @@ _MODE_FLAGS: dict[str, tuple[str, ...]] = {
     "silhouette": ("db", "tree", "body", "kind", "home", "background", "empty_frames"),
 }
 """Flags of one mode only."""
+
+
 def register(parser: argparse.ArgumentParser) -> None:
     """Add the `node` arguments to `parser`."""
     parser.add_argument(
@@ -193,10 +195,12 @@ def register(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="print a status line to stderr every few seconds",
     )
-    parser.set_defaults(run=_run)
+    parser.set_defaults(run=run)
 
 
-def _run(args: argparse.Namespace) -> int:
+def run(args: argparse.Namespace) -> int:
+    """Open the node on its one source and send a packet per frame to `--server` until the
+    source ends (or Ctrl-C); print the run's summary."""
     kind = _source_of(args)
     cameras = read_calibration(args.calib)
     if args.camera >= len(cameras):

@@ -75,17 +75,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(stage, exc.problem) from None
     tree = stored_tree(args.db, args.tree, view, chosen_body(args))
     tracker = SilhouetteTracker(tree, height=args.height)
-    try:
-        empty_stage = "--background" if args.background else f"--empty-frames {args.empty_frames}"
-        seconds, held = track_video(
-            frames, extractor, tracker, out, args.fps, args.video, empty_stage
-        )
-    except BaseException:
-        out.unlink(missing_ok=True)
-        raise
-    if not seconds:
-        out.unlink(missing_ok=True)
-        raise InputError(args.video, "nobody was seen in any frame")
+    empty_stage = "--background" if args.background else f"--empty-frames {args.empty_frames}"
+    seconds, held = track_video(frames, extractor, tracker, out, args.fps, args.video, empty_stage)
     print(
         f"track-video: {len(seconds)} frames tracked ({held} held: no silhouette), "
         f"{np.median(seconds) * 1e3:.1f} ms per frame (p50: silhouette and tracking), "
