@@ -164,6 +164,15 @@ class HumanoidRig:
         )
 
     @cached_property
+    def hips_to_legs(self) -> np.ndarray:
+        """Rest offset (3,) from the Hips joint to the middle of the upper-leg joints,
+        meters: zero for the mannequin, whose Hips lies between its legs; avatars put
+        their Hips joint above, level with or below the legs."""
+        offset = (self.rest[11] + self.rest[14]) / 2 - self.rest[0]
+        offset.setflags(write=False)
+        return offset
+
+    @cached_property
     def ankle_height(self) -> float:
         """Height of the ankles above the floor in the rest pose, meters."""
         return float(self.rest[[13, 16], 1].mean())

@@ -122,5 +122,7 @@ def retarget_together(
             stream._settling.append(poses[i])
             stream._leg_length = leg_length(np.stack(stream._settling))
         assert stream._leg_length is not None
-        roots[i] = root_positions(poses[i][None], stream._rig, stream._leg_length)[0]
+        roots[i] = root_positions(
+            poses[i][None], stream._rig, stream._leg_length, rotations[i, :1]
+        )[0]
     return rotations, roots

@@ -20,8 +20,10 @@ Twist comes from the body lines and the limb planes:
   them); feet stay level, turned about the vertical to the knee axis, and follow the
   shin instead where the knee axis is far from horizontal.
 
-The root (Hips) follows the captured hip middle scaled by the ratio of the rig's leg
-length to the subject's, so the avatar's feet stay on the floor and its steps match.
+The root is placed by the avatar's upper-leg joints, not its Hips joint: their middle
+follows the captured hip middle scaled by the ratio of the rig's leg length to the
+subject's, so the avatar's feet stay on the floor and its steps match, wherever the
+avatar's Hips joint sits (above, level with or below its legs).
 """
 
 from __future__ import annotations
@@ -141,7 +143,7 @@ def retarget(poses: np.ndarray, rig: HumanoidRig, fps: float) -> HumanoidMotion:
     if not np.isfinite(poses).all():
         raise ValueError("retarget needs finite poses (fill or drop frames with NaN first)")
     rotations, _, _ = local_rotations(poses, rig)
-    root = root_positions(poses, rig, leg_length(poses))
+    root = root_positions(poses, rig, leg_length(poses), rotations[:, 0])
     return HumanoidMotion(rig=rig, rotations=rotations, root=root, fps=fps)
 
 
@@ -216,12 +218,17 @@ def _local_quaternions(world: np.ndarray) -> np.ndarray:
     return _quaternions(local)
 
 
-def root_positions(poses: np.ndarray, rig: HumanoidRig, subject_leg_length: float) -> np.ndarray:
-    """Hips positions (n, 3) in meters for captured poses (n, 13, 3) in meters: the hip
-    middle scaled by the ratio of the rig's leg length to `subject_leg_length` (meters)
-    and lifted by the rig's ankle height."""
+def root_positions(
+    poses: np.ndarray, rig: HumanoidRig, subject_leg_length: float, hips: np.ndarray
+) -> np.ndarray:
+    """Hips positions (n, 3) in meters for captured poses (n, 13, 3) in meters and the
+    Hips' rotations `hips` (n, 4), quaternions (x, y, z, w): placed so that the middle of
+    the rig's upper-leg joints lands on the captured hip middle, scaled by the ratio of
+    the rig's leg length to `subject_leg_length` (meters) and lifted by the rig's ankle
+    height. The rig's Hips joint may sit anywhere relative to its legs."""
     scale = rig.leg_length / subject_leg_length
-    return _hip_middle(np.asarray(poses, dtype=np.float64)) * scale + [0.0, rig.ankle_height, 0.0]
+    legs = _hip_middle(np.asarray(poses, dtype=np.float64)) * scale + [0.0, rig.ankle_height, 0.0]
+    return legs - _rotation_matrices(np.asarray(hips, dtype=np.float64)) @ rig.hips_to_legs
 
 
 def _world_rotations(

@@ -7,6 +7,7 @@ import pytest
 
 from samba.body.skeleton import Body
 from samba.export.humanoid import BONE_INDEX, BONE_NAMES, PARENTS, HumanoidRig
+from samba.export.live_retarget import LiveRetarget
 from samba.export.motion import HumanoidMotion
 from samba.export.retargeting import MEASURED_BONES, bone_direction_errors, leg_length, retarget
 from samba.synthetic.motions import generate
@@ -206,3 +207,33 @@ def test_bone_names_are_unity_humanoid_names() -> None:
     assert BONE_NAMES[0] == "Hips"
     assert {"LeftUpperArm", "RightLowerLeg", "Neck", "Chest", "Spine"} <= set(BONE_NAMES)
     assert all(PARENTS[j] < j for j in range(1, len(PARENTS)))
+
+
+def _hips_moved(rig: HumanoidRig, dy: float) -> HumanoidRig:
+    """`rig` with its Hips joint `dy` meters above (below, if negative) its leg joints'
+    middle, as avatars have it; every other joint stays."""
+    rest = rig.rest.copy()
+    legs = rest[[BONE_INDEX["LeftUpperLeg"], BONE_INDEX["RightUpperLeg"]]]
+    rest[BONE_INDEX["Hips"]] = legs.mean(axis=0)
+    rest[BONE_INDEX["Hips"], 1] += dy
+    return HumanoidRig(rest=rest, tips=rig.tips, name=f"hips{dy:+.2f}")
+
+
+@pytest.mark.parametrize(
+    "dy", [-0.07, 0.0, 0.08, 0.25], ids=["7cm-below", "level", "8cm-above", "25cm-above"]
+)
+def test_a_planted_foot_stays_on_the_floor_wherever_the_avatars_hips_joint_sits(dy: float) -> None:
+    """At the source walk's foot contacts each avatar's ankle is at its own rest ankle
+    height within 1 cm, offline and live, whatever the height of its Hips joint."""
+    rig = _hips_moved(HumanoidRig.from_body(), dy)
+    take = generate("walk", seed=2, seconds=4.0)
+    ankles = take.poses[:, [11, 12], 1]
+    planted = ankles < 0.001  # (n, 2): the source's foot contacts (the walk plants at y = 0)
+    offline = retarget(take.poses, rig, take.fps)
+    live = LiveRetarget(rig, leg_length=leg_length(take.poses))
+    live_roots = np.stack([live.step(pose)[1] for pose in take.poses])
+    for root in (offline.root, live_roots):
+        motion = HumanoidMotion(rig, offline.rotations, root, take.fps)
+        feet = motion.world_positions()[:, [BONE_INDEX["LeftFoot"], BONE_INDEX["RightFoot"]], 1]
+        assert planted.sum() > 20
+        assert np.abs(feet[planted] - rig.ankle_height).max() < 0.01
