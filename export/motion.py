@@ -14,14 +14,21 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from samba.body import continuous_quaternions, resample_times, sample_linear, sample_rotations
+from samba.body import (
+    continuous_quaternions,
+    resample_times,
+    sample_linear,
+    sample_rotations,
+    whole_fps,
+)
 from samba.export.humanoid import N_BONES, PARENTS, TIP_BONES, HumanoidRig
 
 
 @dataclass(frozen=True)
 class HumanoidMotion:
     """`rotations` (n, 17, 4) local quaternions (x, y, z, w; normalised on creation) and
-    `root` (n, 3) Hips positions in meters, sampled at `fps` frames per second, for `rig`."""
+    `root` (n, 3) Hips positions in meters, sampled at `fps` frames per second, for `rig`;
+    a rate within 0.01% of a whole number is that number (`samba.body.whole_fps`)."""
 
     rig: HumanoidRig
     rotations: np.ndarray
@@ -45,6 +52,7 @@ class HumanoidMotion:
         if not (np.isfinite(root).all() and np.isfinite(norms).all() and (norms > 0).all()):
             raise ValueError("motion has non-finite root positions or non-finite / zero rotations")
         object.__setattr__(self, "rotations", continuous_quaternions(rotations / norms))
+        object.__setattr__(self, "fps", whole_fps(float(self.fps)))
         object.__setattr__(self, "root", root)
 
     def __len__(self) -> int:

@@ -21,7 +21,7 @@ from typing import NoReturn
 
 import numpy as np
 
-from samba.body import euler_to_quaternions, forward_kinematics
+from samba.body import euler_to_quaternions, forward_kinematics, whole_fps
 from samba.ingest.errors import BvhError
 
 _CHANNELS = {f"{axis}{kind}": (kind, axis) for axis in "XYZ" for kind in ("position", "rotation")}
@@ -60,8 +60,9 @@ class BvhFile:
 
     @property
     def fps(self) -> float:
-        """Frames per second, 1 / frame time."""
-        return 1.0 / self.frame_time
+        """Frames per second, 1 / frame time, taken as the whole number it lies within
+        0.01% of (`samba.body.whole_fps`: a frame time of 0.0166670 s is 60 fps)."""
+        return whole_fps(1.0 / self.frame_time)
 
     @property
     def n_frames(self) -> int:

@@ -24,11 +24,23 @@ POSE_TOPIC = "/pose_raw"
 """Topic of the reconstructed poses (`samba.PoseRaw` JSON: `joints` 13 x [x, y, z] meters)."""
 TAKE_METADATA = "take"
 """Name of the metadata record holding `name`, `fps` and `start_time` (ISO 8601, UTC)."""
+GAP_PERIODS = 1.5
+"""A step between recorded frames longer than this many frame periods is a gap of
+dropped frames."""
+MAX_INTERPOLATED_GAP_S = 0.5
+"""Gaps up to this long (seconds) are bridged by interpolating the poses on either side;
+across a longer one the last pose before it is held."""
 
 
 def read_take(path: str | Path) -> Take:
     """The take recorded in the MCAP file `path`: poses (n, 13, 3) float32 meters from
     `/pose_raw`, fps and name from the `take` metadata, rig "live".
+
+    The poses keep their recorded timing: where frames were dropped (a step between
+    recorded capture times longer than `GAP_PERIODS` frame periods) the take is resampled
+    on the recorded timestamps to a regular grid at its fps, interpolating the poses
+    across gaps up to `MAX_INTERPOLATED_GAP_S` and holding the last pose across longer
+    ones, with a warning in `Take.warnings` saying what was done.
 
     A file cut short (no footer) gives the frames before the cut, with a warning in
     `Take.warnings` saying so and how many frames were recovered. Raises `TakeFileError`
@@ -43,6 +55,7 @@ def read_take(path: str | Path) -> Take:
     meta: dict[str, str] | None = None
     pose_channels: set[int] = set()
     poses: list[np.ndarray] = []
+    times: list[int] = []
     with stream:
         records = _RecordStream(stream, path.stat().st_size)
         for record in records:
@@ -52,6 +65,7 @@ def read_take(path: str | Path) -> Take:
                 pose_channels.add(record.id)
             elif isinstance(record, Message) and record.channel_id in pose_channels:
                 poses.append(_pose(record, source, len(poses)))
+                times.append(record.log_time)
     cut = records.error
     if records.count == 0:
         raise TakeFileError(source, f"not an MCAP file ({cut})")
@@ -68,6 +82,9 @@ def read_take(path: str | Path) -> Take:
     if not 0 < fps < float("inf"):
         raise TakeFileError(source, f"take metadata has no valid fps: {meta.get('fps')!r}")
     warnings = []
+    recorded, gaps = on_the_clock(np.stack(poses), np.array(times, dtype=np.int64), fps)
+    if gaps:
+        warnings.append(gaps)
     if cut is not None and _ends_whole(path):
         warnings.append(
             f"file damaged inside ({cut}): recovered the {len(poses)} frames before the "
@@ -80,13 +97,50 @@ def read_take(path: str | Path) -> Take:
         )
     return Take(
         name=meta.get("name") or path.stem,
-        poses=np.stack(poses),
+        poses=recorded,
         fps=fps,
         source=str(path.resolve()),
         rig="live",
         warnings=warnings,
         meta={"start_time": meta.get("start_time", ""), "format": "mcap"},
     )
+
+
+def on_the_clock(poses: np.ndarray, times_ns: np.ndarray, fps: float) -> tuple[np.ndarray, str]:
+    """Poses (n, 13, 3) captured at `times_ns` (n,) integer nanoseconds, on a regular grid
+    at `fps` frames per second from the first capture to the last, and what was done in
+    words ("" when the frames were already regular: returned unchanged).
+
+    Frames out of order are sorted and frames of one capture time kept once. A gap
+    (a step over `GAP_PERIODS` periods) up to `MAX_INTERPOLATED_GAP_S` long is bridged by
+    linear interpolation; across a longer one the last pose before it is held."""
+    order = np.argsort(times_ns, kind="stable")
+    times_ns, keep = np.unique(times_ns[order], return_index=True)
+    poses = poses[order][keep]
+    seconds = (times_ns - times_ns[0]) / 1e9
+    steps = np.diff(seconds)
+    period = 1.0 / fps
+    gap_steps = steps > GAP_PERIODS * period
+    if not gap_steps.any():
+        return poses, ""
+    grid = np.arange(int(np.floor(seconds[-1] * fps + 0.5)) + 1) / fps
+    after = np.clip(np.searchsorted(seconds, grid, side="right"), 1, len(seconds) - 1)
+    before = after - 1
+    span = seconds[after] - seconds[before]
+    weight = np.clip((grid - seconds[before]) / span, 0.0, 1.0)
+    weight[span > MAX_INTERPOLATED_GAP_S] = 0.0  # hold the last pose across a long gap
+    resampled = poses[before] + weight[:, None, None] * (poses[after] - poses[before])
+    held = int((steps > MAX_INTERPOLATED_GAP_S).sum())
+    missing = int(np.round(steps[gap_steps] * fps).sum() - gap_steps.sum())
+    note = (
+        f"{int(gap_steps.sum())} gaps of dropped frames (longest {steps.max():.2f} s, about "
+        f"{missing} frames missing): resampled on the recorded timestamps to {len(grid)} "
+        f"frames at {fps:g} fps ({grid[-1]:.2f} s), poses interpolated across gaps up to "
+        f"{MAX_INTERPOLATED_GAP_S:g} s"
+    )
+    if held:
+        note += f", the last pose held across {held} longer"
+    return resampled.astype(np.float32), note
 
 
 def _ends_whole(path: Path) -> bool:

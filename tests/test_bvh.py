@@ -577,3 +577,18 @@ def test_unreadable_paths(tmp_path: Path) -> None:
         with pytest.raises(BvhError) as info:
             load_bvh_take(path)
         assert str(info.value).startswith(f"{path}: cannot read file")
+
+
+@pytest.mark.parametrize(
+    ("frame_time", "fps"),
+    [("0.0166670", 60.0), ("0.0083333", 120.0), (".0333333", 30.0), ("0.0172", 1 / 0.0172)],
+)
+def test_a_frame_rate_within_a_hundredth_of_a_percent_of_a_whole_number_is_that_number(
+    walk, frame_time: str, fps: float
+) -> None:
+    """Frame times written to 7 decimals (0.0166670 s: 59.9988 fps) read as the whole rate
+    they stand for, so exports keep it (USD timeCodesPerSecond 60, not 59.9988); a rate
+    farther from a whole number (58.14) stays as written."""
+    header = next(x for x in walk.text.splitlines() if x.startswith("Frame Time"))
+    text = walk.text.replace(header, f"Frame Time: {frame_time}")
+    assert parse_bvh(text).fps == pytest.approx(fps, rel=1e-12)

@@ -264,3 +264,31 @@ def test_export_of_a_recording(recording: Path, tmp_path: Path) -> None:
     out = tmp_path / "x.bvh"
     assert main(["export", str(recording), "-o", str(out)]) == 0
     assert read_bvh(out).n_frames == 60
+
+
+def test_a_take_with_dropped_frames_keeps_its_recorded_timing(
+    take: Take, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Frames 20-29 (0.33 s) and 35-54 (0.67 s) of a 2-s walk were never recorded: the
+    take still lasts 2 s at 30 fps, the short gap interpolated, the long one held, and
+    the export says so and plays the motion at its speed."""
+    path = tmp_path / "gaps.mcap"
+    kept = [i for i in range(len(take)) if not (20 <= i < 30 or 35 <= i < 55)]
+    with TakeRecorder(path, take.fps) as recorder:
+        for i in kept:
+            estimate = PoseEstimate(take.poses[i], 0.004, 8, True, False)
+            recorder.write_frame(frame_time(i), estimate, markers_of(take.poses[i]))
+    read = read_take(path)
+    assert len(read) == len(take) and read.fps == take.fps
+    (warning,) = read.warnings
+    assert warning.startswith("2 gaps of dropped frames (longest 0.70 s, about 30 frames")
+    assert "the last pose held across 1 longer" in warning
+    np.testing.assert_allclose(read.poses[kept], take.poses[kept], atol=1e-5)
+    step = (np.arange(1, 11) / 11)[:, None, None]  # the short gap: linear from 19 to 30
+    bridged = take.poses[19] + step * (take.poses[30] - take.poses[19])
+    np.testing.assert_allclose(read.poses[20:30], bridged, atol=1e-5)
+    np.testing.assert_allclose(read.poses[35:55], np.broadcast_to(take.poses[34], (20, 13, 3)))
+    assert main(["export", str(path), "-o", str(tmp_path / "gaps.bvh")]) == 0
+    out = capsys.readouterr()
+    assert f"{len(take)} frames at 30 fps ({(len(take) - 1) / 30:.1f} s)" in out.out
+    assert "gaps of dropped frames" in out.err

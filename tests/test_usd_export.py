@@ -329,3 +329,16 @@ def test_reader_rejects_unreadable_and_non_skeletal_files(tmp_path: Path) -> Non
     with pytest.raises(ExportError, match="cannot read") as raised:
         usd_validation_errors(tmp_path / "text.usda")
     assert raised.value.source == str(tmp_path / "text.usda")
+
+
+def test_a_motion_at_a_rate_a_hair_off_a_whole_number_is_written_at_that_number(
+    tmp_path: Path,
+) -> None:
+    """A take read at 59.9988 fps (BVH frame time 0.0166670) is written with 60 time codes
+    per second, the rate it stands for."""
+    motion = synthetic_motion()
+    odd = HumanoidMotion(motion.rig, motion.rotations, motion.root, 1 / 0.016667)
+    assert odd.fps == 60.0
+    path = tmp_path / "odd.usda"
+    write_usd(path, odd, box_mesh(odd.rig))
+    assert Usd.Stage.Open(str(path)).GetTimeCodesPerSecond() == 60.0

@@ -21,6 +21,7 @@ from samba.body.kinematics import (
     sample_linear,
     sample_rotations,
     unit_vectors,
+    whole_fps,
 )
 from samba.body.segments import point_segment_distances, segment_distances
 from samba.body.skeleton import (
@@ -82,4 +83,5 @@ __all__ = [
     "standard_pose",
     "standing_pose",
     "unit_vectors",
+    "whole_fps",
 ]

@@ -67,6 +67,19 @@ def quaternion_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
+WHOLE_FPS_TOLERANCE = 1e-4
+"""A frame rate within this fraction (0.01%) of a whole number is that number."""
+
+
+def whole_fps(fps: float) -> float:
+    """`fps` (frames per second), or the whole number it lies within 0.01% of: a BVH frame
+    time of 0.0166670 s means 60 fps, not 59.9988."""
+    whole = round(fps)
+    if whole >= 1 and abs(fps - whole) <= WHOLE_FPS_TOLERANCE * fps:
+        return float(whole)
+    return fps
+
+
 def resample_times(n_frames: int, source_fps: float, target_fps: float) -> np.ndarray:
     """Fractional source frame indices (m,) of the frames of a clip resampled to `target_fps`.
 
