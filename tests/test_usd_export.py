@@ -336,7 +336,7 @@ def test_a_motion_at_a_rate_a_hair_off_a_whole_number_is_written_at_that_number(
 ) -> None:
     """A take read at 59.9988 fps (BVH frame time 0.0166670) is written with 60 time codes
     per second, the rate it stands for."""
-    motion = synthetic_motion()
+    _, motion = synthetic_motion(seconds=1.0)
     odd = HumanoidMotion(motion.rig, motion.rotations, motion.root, 1 / 0.016667)
     assert odd.fps == 60.0
     path = tmp_path / "odd.usda"
