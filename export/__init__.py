@@ -10,13 +10,14 @@ from samba.export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
 from samba.export.live_retarget import LiveRetarget, retarget_together
 from samba.export.mannequin import mannequin
 from samba.export.motion import HumanoidMotion
-from samba.export.outputs import load_avatar, write_export
+from samba.export.outputs import Avatar, load_avatar, write_export
 from samba.export.retargeting import retarget
 
 __all__ = [
     "BONE_NAMES",
     "N_BONES",
     "UNITS",
+    "Avatar",
     "BvhSkeleton",
     "HumanoidMotion",
     "HumanoidRig",

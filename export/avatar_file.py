@@ -53,7 +53,7 @@ _ALIASES: dict[str, tuple[str, ...]] = {
 """Humanoid bone -> node names that mean it, in the normalised form `_plain` gives."""
 
 
-USD_SUFFIXES: tuple[str, ...] = (".usd", ".usda", ".usdc")
+USD_SUFFIXES: tuple[str, ...] = (".usd", ".usda", ".usdc", ".usdz")
 """Suffixes (any letter case) of the avatars read as USD: `samba.export.usd_writer.SUFFIXES`,
 spelt out so that reading a glTF avatar does not load usd-core."""
 
@@ -67,7 +67,7 @@ direction to turn, and retargeting onto it divides by zero."""
 
 def read_avatar_rig(path: str | Path) -> HumanoidRig:
     """The humanoid rig of the avatar file at `path`, rest pose (17, 3) in meters, +Y up,
-    facing +Z. USD (.usd, .usda, .usdc) by its suffix, any other file as glTF: binary
+    facing +Z. USD (.usd, .usda, .usdc, .usdz) by its suffix, any other file as glTF: binary
     (.glb, .vrm) or JSON (.gltf), told apart by content. Raises `ExportError` naming the
     file when it cannot be read or has no humanoid skeleton (listing the bones that are
     missing)."""

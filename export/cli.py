@@ -40,7 +40,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--avatar",
         metavar="FILE",
         help="a humanoid avatar whose skeleton the takes are put on: glTF (.glb, .gltf), "
-        "VRM (.vrm) or USD (.usd, .usda, .usdc)",
+        "VRM (.vrm) or USD (.usd, .usda, .usdc, .usdz)",
     )
     parser.add_argument(
         "--fps",
@@ -53,6 +53,11 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="A:B",
         dest="frame_range",
         help="export only frames A..B-1 of each take (either end may be left out)",
+    )
+    parser.add_argument(
+        "--skip-tpose",
+        action="store_true",
+        help="drop the leading T-pose frames of BVH files (as samba db import does)",
     )
     parser.add_argument(
         "--unit",
@@ -73,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     bar = tqdm(targets, unit="take", disable=len(targets) == 1 or not sys.stderr.isatty())
     for ref, out in bar:
         try:
-            take = load_take(ref, args.db)
+            take = load_take(ref, args.db, skip_tpose=args.skip_tpose)
             for warning in take.warnings:  # a recovered take says what it lost
                 tqdm.write(f"samba: warning: {ref}: {warning}", file=sys.stderr)
             poses = take.poses[frames]

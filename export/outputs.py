@@ -13,12 +13,11 @@ from samba.export.humanoid import HumanoidRig
 from samba.export.motion import HumanoidMotion
 
 FORMAT_SUFFIXES: dict[str, tuple[str, ...]] = {
-    "usd": (".usda", ".usdc", ".usd"),
+    "usd": (".usda", ".usdc", ".usd", ".usdz"),
     "glb": (".glb",),
     "bvh": (".bvh",),
 }
 """Format -> accepted output suffixes; the first is used for files named in a folder."""
-
 
 
 @dataclass(frozen=True)
@@ -37,7 +36,7 @@ def format_of(path: Path) -> str:
     raise ExportError(
         str(path),
         "cannot tell the format from the suffix: give --format "
-        "usd|glb|bvh or name the file .usda, .usdc, .usd, .glb or .bvh",
+        "usd|glb|bvh or name the file .usda, .usdc, .usd, .usdz, .glb or .bvh",
     )
 
 

@@ -1,5 +1,5 @@
-"""USD export (.usda text, .usdc or .usd binary): the humanoid skeleton, its animation, an
-optional skinned body, as UsdSkel (FORMATS.md §1).
+"""USD export (.usda text, .usdc or .usd binary, .usdz package): the humanoid skeleton, its
+animation, an optional skinned body, as UsdSkel (FORMATS.md §1).
 
 Layout (§1.1), which UsdValidation passes with no errors:
 
@@ -22,10 +22,11 @@ Stage metadata: +Y up, 1 meter per unit, time codes are frame numbers 0 .. n - 1
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
-from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdSkel, Vt
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
 
 from samba.base import atomic_path
 from samba.export.avatar_mesh import MAX_INFLUENCES, AvatarMesh
@@ -33,9 +34,10 @@ from samba.export.errors import ExportError
 from samba.export.humanoid import HumanoidRig
 from samba.export.motion import HumanoidMotion
 
-SUFFIXES: tuple[str, ...] = (".usda", ".usdc", ".usd")
-"""File name suffixes `write_usd` accepts (any letter case): the suffix picks text (.usda)
-or binary (.usdc; .usd is binary too, USD's default for it)."""
+SUFFIXES: tuple[str, ...] = (".usda", ".usdc", ".usd", ".usdz")
+"""File name suffixes `write_usd` accepts (any letter case): the suffix picks text (.usda),
+binary (.usdc; .usd is binary too, USD's default for it) or a USDZ package (.usdz: the
+binary layer zipped as Apple's AR tools and asset stores take it)."""
 ROOT_PATH = Sdf.Path("/Avatar")
 SKELETON_PATH = ROOT_PATH.AppendChild("Skel")
 ANIMATION_PATH = SKELETON_PATH.AppendChild("Anim")
@@ -46,7 +48,8 @@ def write_usd(
     path: str | os.PathLike[str], motion: HumanoidMotion, mesh: AvatarMesh | None = None
 ) -> None:
     """Write `motion` (and `mesh` skinned to its rig, if given) as USD at `path`: text for
-    a `.usda` suffix, binary for `.usdc` or `.usd`.
+    a `.usda` suffix, binary for `.usdc` or `.usd`, a USDZ package for `.usdz` (made by
+    usd-core's ARKit packaging, `UsdUtils.CreateNewARKitUsdzPackage`).
 
     Lengths in meters, one time code per frame (frame k at k / motion.fps seconds). The
     stage is built in memory and exported atomically: on any failure `path` keeps its old
@@ -55,16 +58,31 @@ def write_usd(
     """
     suffix = Path(path).suffix
     if suffix.lower() not in SUFFIXES:
-        raise ExportError(str(path), f"unsupported file type {suffix!r}: use .usda, .usdc or .usd")
+        raise ExportError(
+            str(path), f"unsupported file type {suffix!r}: use .usda, .usdc, .usd or .usdz"
+        )
     stage = _stage(motion, mesh)  # the stage owns the layer: keep it alive while exporting
     try:
         with atomic_path(path) as tmp:
-            if not stage.GetRootLayer().Export(str(tmp)):
+            if suffix.lower() == ".usdz":
+                _package(stage, Path(path).stem, tmp)
+            elif not stage.GetRootLayer().Export(str(tmp)):
                 raise OSError(f"USD could not export to {tmp}")
     except Tf.ErrorException as exc:
         raise ExportError(str(path), f"cannot write the file: {tf_error_text(exc)}") from exc
     except OSError as exc:
         raise ExportError(str(path), f"cannot write the file: {exc.strerror or exc}") from exc
+
+
+def _package(stage: Usd.Stage, name: str, usdz: Path) -> None:
+    """Write `stage` as the USDZ package `usdz`: its layer exported as `name`.usdc in a
+    temporary folder, then packaged by usd-core for ARKit."""
+    with tempfile.TemporaryDirectory(prefix="samba-usdz-") as folder:
+        layer = Path(folder) / f"{name}.usdc"
+        if not stage.GetRootLayer().Export(str(layer)):
+            raise OSError(f"USD could not export to {layer}")
+        if not UsdUtils.CreateNewARKitUsdzPackage(Sdf.AssetPath(str(layer)), str(usdz)):
+            raise OSError(f"USD could not package {layer} as {usdz}")
 
 
 def tf_error_text(exc: Tf.ErrorException) -> str:

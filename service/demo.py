@@ -28,7 +28,7 @@ import numpy as np
 
 from samba.cameras import write_calibration
 from samba.db import PoseStore, build_synthetic_store
-from samba.export import load_avatar, retarget, write_export
+from samba.export import Avatar, load_avatar, retarget, write_export
 from samba.ingest import BvhImportOptions, load_bvh_take, read_take
 from samba.service.serve import LiveServer
 from samba.service.session import CaptureSession
@@ -59,6 +59,7 @@ class DemoSettings:
     out: str | None = None
     open_viewer: bool = False
     seed: int = 0
+    avatar: str | None = None
 
 
 def run_demo(settings: DemoSettings) -> int:
@@ -72,6 +73,7 @@ def run_demo(settings: DemoSettings) -> int:
 
 
 async def _demo(folder: Path, settings: DemoSettings) -> int:
+    avatar = load_avatar(settings.avatar)  # a bad avatar file stops the demo before it builds
     t0 = time.perf_counter()
     if settings.db:
         store = PoseStore.open(settings.db)
@@ -95,6 +97,7 @@ async def _demo(folder: Path, settings: DemoSettings) -> int:
             "database": str(where),
             "fps": settings.fps,
             "vmc": [f"{h}:{p}" for h, p in (settings.vmc, counter.address)],
+            **({"avatar": settings.avatar} if settings.avatar else {}),
         },
         "samba demo",
     )
@@ -129,7 +132,7 @@ async def _demo(folder: Path, settings: DemoSettings) -> int:
         counter.close()
         take = session.stop_take()
         metrics = live.server.metrics()["sessions"][SESSION]
-    _report(metrics, counter.frames, capture, take.path, folder)
+    _report(metrics, counter.frames, capture, take.path, folder, avatar)
     return 0
 
 
@@ -155,7 +158,12 @@ def _capture(settings: DemoSettings) -> tuple[SyntheticCapture, str]:
 
 
 def _report(
-    metrics: dict, vmc_frames: int, capture: SyntheticCapture, take_path: Path, folder: Path
+    metrics: dict,
+    vmc_frames: int,
+    capture: SyntheticCapture,
+    take_path: Path,
+    folder: Path,
+    avatar: Avatar,
 ) -> None:
     sync, latency = metrics["sync"], metrics["latency"]
     print(
@@ -174,7 +182,6 @@ def _report(
         f"{error[:, [1, 2, 5, 6, 9, 10, 11, 12]].mean():.1f} cm, other joints "
         f"{error[:, [0, 3, 4, 7, 8]].mean():.1f} cm"
     )
-    avatar = load_avatar(None)
     motion = retarget(recorded.poses, avatar.rig, recorded.fps)
     outputs = [folder / "exports" / f"{take_path.stem}.{s}" for s in ("usda", "glb")]
     outputs[0].parent.mkdir(exist_ok=True)

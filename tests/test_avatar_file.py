@@ -167,7 +167,9 @@ def test_unreadable_avatars_are_named(tmp_path: Path, content: bytes) -> None:
         read_avatar_rig(path)
     assert e.value.source == str(path)
     if not content.startswith(b"glTF"):
-        assert "avatars are read from .glb, .vrm, .gltf, .usd, .usda or .usdc files" in str(e.value)
+        assert "avatars are read from .glb, .vrm, .gltf, .usd, .usda, .usdc or .usdz files" in str(
+            e.value
+        )
     with pytest.raises(ExportError, match="cannot read"):
         read_avatar_rig(tmp_path / "missing.vrm")
 

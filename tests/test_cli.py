@@ -9,11 +9,15 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from samba.cli import main
 from samba.db.store import PoseStore
 from samba.export.gltf_reader import read_glb_joint_positions
+from samba.export.gltf_writer import write_glb
+from samba.export.humanoid import BONE_INDEX, HumanoidRig
+from samba.export.motion import HumanoidMotion
 from samba.export.usd_reader import read_usd_joint_positions
 from samba.ingest.mcap_take import read_take
 
@@ -220,3 +224,24 @@ def test_an_unwritable_place_gives_one_clear_line(tmp_path: Path, capsys) -> Non
     code, _, err = run(capsys, "db", "init", str(locked / "file" / "store"))
     assert code == 1
     assert err.startswith("samba: error:") and "Traceback" not in err
+
+
+def test_demo_with_an_avatar_streams_and_exports_onto_it(tmp_path: Path, capsys) -> None:
+    """`samba demo --avatar FILE`: the exports carry the avatar's skeleton (here one whose
+    Hips joint sits 12 cm above its legs), with its feet on the floor."""
+    mannequin = HumanoidRig.from_body()
+    rest = mannequin.rest.copy()
+    rest[BONE_INDEX["Hips"], 1] += 0.12
+    rig = HumanoidRig(rest=rest, tips=mannequin.tips)
+    avatar = tmp_path / "tall-hips.glb"
+    write_glb(avatar, HumanoidMotion(rig, np.tile([0.0, 0.0, 0.0, 1.0], (1, 17, 1)),
+                                     rest[:1], 30.0))
+    code, out, _ = run(capsys, "demo", "--out", str(tmp_path / "demo"), "--seconds", "1.5",
+                       "--vmc", "127.0.0.1:9", "--avatar", str(avatar))
+    assert code == 0 and "frames out: 90 of 90" in out
+    names, joints = read_glb_joint_positions(tmp_path / "demo" / "exports" / "demo_walk.glb")
+    hips, feet = names.index("Hips"), [names.index("LeftFoot"), names.index("RightFoot")]
+    leg = names.index("LeftUpperLeg")
+    offset = np.linalg.norm(joints[:, hips] - joints[:, leg], axis=-1)
+    np.testing.assert_allclose(offset, np.linalg.norm(rest[hips] - rest[leg]), atol=1e-4)
+    assert abs(np.median(joints[:, feet, 1].min(axis=1)) - rig.ankle_height) < 0.01

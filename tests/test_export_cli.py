@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bvh_fixtures import make_humanoid
 from glb_edit import write_gltf
 from pxr import Usd, UsdGeom
 
@@ -167,3 +168,16 @@ def test_a_bad_gltf_or_usd_avatar_is_one_error_line_naming_it(
         err = capsys.readouterr().err
         assert err.startswith(f"samba: error: {tmp_path / name}: {problem}")
         assert err.count("\n") == 1 and not out.exists()
+
+
+def test_skip_tpose_drops_the_leading_t_pose_frames_the_warning_names(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = tmp_path / "tpose.bvh"
+    source.write_text(make_humanoid("cmu-max", frames=40, tpose_frames=3).text)
+    assert run(source, "-o", tmp_path / "kept.bvh") == 0
+    out = capsys.readouterr()
+    assert "40 frames at 30 fps" in out.out and "--skip-tpose drops them" in out.err
+    assert run(source, "-o", tmp_path / "dropped.bvh", "--skip-tpose") == 0
+    out = capsys.readouterr()
+    assert "37 frames at 30 fps" in out.out and "T-pose" not in out.err

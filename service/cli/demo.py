@@ -31,6 +31,12 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="HOST:PORT",
         help=f"also stream VMC here (default 127.0.0.1:{MARIONETTE_PORT})",
     )
+    parser.add_argument(
+        "--avatar",
+        metavar="FILE",
+        help="stream and export onto this humanoid avatar (glTF, VRM or USD; default: the "
+        "built-in mannequin)",
+    )
     parser.add_argument("--open", action="store_true", help="open the viewer in a browser")
     parser.add_argument("--seed", type=int, default=0, help="random seed")
     parser.set_defaults(run=run)
@@ -57,5 +63,6 @@ def run(args: argparse.Namespace) -> int:
         out=args.out,
         open_viewer=args.open,
         seed=args.seed,
+        avatar=args.avatar,
     )
     return run_demo(settings)

@@ -55,7 +55,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     one.add_argument(
         "--avatar",
-        help="avatar file (.vrm, .glb, .gltf, .usd, .usda, .usdc) whose rig the VMC stream uses",
+        help="avatar file (.vrm, .glb, .gltf, .usd, .usda, .usdc, .usdz) whose rig the VMC "
+        "stream uses",
     )
     one.add_argument("--wait-ms", type=float, default=50.0, help="wait for late cameras (ms)")
     one.add_argument(
