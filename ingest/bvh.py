@@ -23,6 +23,7 @@ import numpy as np
 
 from samba.body import euler_to_quaternions, forward_kinematics, whole_fps
 from samba.ingest.errors import BvhError
+from samba.ingest.resolver import SkeletonTree
 
 _CHANNELS = {f"{axis}{kind}": (kind, axis) for axis in "XYZ" for kind in ("position", "rotation")}
 _TOKEN = re.compile(r"[{}]|[^\s{}]+")
@@ -73,6 +74,15 @@ class BvhFile:
     def names(self) -> tuple[str, ...]:
         """Joint names in hierarchy order (End Sites included)."""
         return tuple(j.name for j in self.joints)
+
+    def skeleton(self) -> SkeletonTree:
+        """The joint tree as the humanoid resolver reads it, posed as in the first frame
+        (file units): a BVH's rest offsets need not be a pose (Character Creator lays its
+        rest skeleton along one axis and turns it upright in every frame)."""
+        everything = list(range(len(self.joints)))
+        parents, rotations, translations = self.local_transforms(everything, np.array([0]))
+        positions = forward_kinematics(parents, rotations, translations)[0]
+        return SkeletonTree(self.names, tuple(int(p) for p in parents), positions)
 
     def ancestry(self, wanted: list[int]) -> list[int]:
         """The joints in `wanted` plus all their ancestors, in hierarchy order."""

@@ -4,7 +4,9 @@ Built-in maps cover the three rigs of the shared CMU data (cgspeed "3ds Max" nam
 Character Creator / iClone `CC_Base_*`, Daz/Poser `hip/abdomen/lThigh`) and the other
 rigs users commonly bring (cgspeed "MotionBuilder" names, Mixamo `mixamorig:*`,
 Unity / VRM humanoid names). Names match case-insensitively after dropping a namespace
-prefix such as `mixamorig:`. Anything else is mapped by a TOML file:
+prefix such as `mixamorig:`. Any other rig is mapped by the humanoid resolver
+(`samba.ingest.resolver`: names and tree together), recorded as rig "detected"; where
+that fails, or to override it, by a TOML file:
 
     name = "my-rig"            # optional
     [joints]
@@ -21,6 +23,10 @@ from pathlib import Path
 
 from samba.body import JOINT_NAMES
 from samba.ingest.errors import RigError
+from samba.ingest.resolver import SkeletonTree, resolve_humanoid
+
+DETECTED = "detected"
+"""The rig name of a skeleton the resolver mapped."""
 
 
 @dataclass(frozen=True)
@@ -180,39 +186,39 @@ def rig_by_name(name: str) -> RigMap:
     raise RigError("--rig", f"unknown rig {name!r}; built-in rigs are {known}")
 
 
-def detect_rig(names: tuple[str, ...], source: str) -> tuple[RigMap, list[int]]:
-    """The first built-in rig that maps all 13 joints, with the joint indices into `names`.
+def detect_rig(tree: SkeletonTree, source: str) -> tuple[RigMap, list[int]]:
+    """The rig of `tree` and the indices of its 13 joints: the first built-in rig that
+    maps all 13 by name, else the humanoid resolver's mapping (rig `DETECTED`).
 
     Mixamo is only chosen when the names carry the `mixamorig` prefix, since after the
-    prefix its names equal MotionBuilder's. Raises `RigError` naming `source` and the
-    joints the closest rig could not find.
+    prefix its names equal MotionBuilder's. Raises `RigError` naming `source` and what
+    the resolver could not place.
     """
+    names = tree.names
     mixamo = any(n.lower().startswith("mixamorig") for n in names)
-    best: tuple[int, RigMap, list[str]] | None = None
     for rig in BUILTIN_RIGS:
         if (rig.name == "mixamo") != mixamo and rig.name in ("mixamo", "motionbuilder"):
             continue
         found, missing = rig.resolve(names)
         if not missing:
             return rig, found
-        if best is None or len(missing) < best[0]:
-            best = (len(missing), rig, missing)
-    assert best is not None
-    _, rig, missing = best
-    raise RigError(
-        source,
-        f"unknown rig: could not map {len(missing)} of 13 joints (closest built-in rig "
-        f"{rig.name!r} lacks {'; '.join(missing)}); pass a mapping file with --map",
-    )
+    try:
+        joints = resolve_humanoid(tree, source).capture_joints
+    except RigError as exc:
+        raise RigError(
+            source, f"unknown rig: {exc.problem}; pass a mapping file with --map"
+        ) from None
+    return RigMap(name=DETECTED, joints=tuple((names[j],) for j in joints)), joints
 
 
 def map_rig(
-    names: tuple[str, ...], source: str, rig: RigMap | None = None
+    tree: SkeletonTree, source: str, rig: RigMap | None = None
 ) -> tuple[RigMap, list[int]]:
-    """Indices into `names` of the 13 joints, by `rig` when given, else by detection."""
+    """Indices into `tree`'s joints of the 13 joints, by `rig` when given (a user's map
+    wins over detection), else by `detect_rig`."""
     if rig is None:
-        return detect_rig(names, source)
-    found, missing = rig.resolve(names)
+        return detect_rig(tree, source)
+    found, missing = rig.resolve(tree.names)
     if missing:
         raise RigError(source, f"rig {rig.name!r} cannot map: {'; '.join(missing)}")
     return rig, found
