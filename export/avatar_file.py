@@ -2,63 +2,38 @@
 `HumanoidRig`.
 
 Bones are found by the VRM humanoid table when the file has one (`VRMC_vrm` or `VRM`
-extension), otherwise by node name (glTF) or the last path component of the joint
-tokens (USD): Unity / VRM humanoid names ("LeftUpperArm", "leftUpperArm") or Mixamo
-names ("mixamorig:LeftArm", "mixamorig_LeftArm"), compared without case, spaces,
-underscores, a "namespace:" prefix and Mixamo's "mixamorig" prefix. Hips, Head and
-both arms' and legs' three bones are required; Spine, Chest and Neck are placed on the
-line from the hips to the middle of the shoulders where the avatar lacks them. The rest
-pose is the file's node transforms (glTF) or the UsdSkel Skeleton's rest transforms,
-else its bind transforms (USD: the first Skeleton that has every required bone), in
-meters with +Y up; a model facing -Z (VRM 0.x) is turned to face +Z, as the
-retargeting expects.
+extension), otherwise by the humanoid resolver (`samba.ingest.resolve_humanoid`: node
+or joint names and the skeleton's tree together), so Unity / VRM, Mixamo, Blender,
+Unreal, Character Creator and unnamed skeletons alike. Hips, Head and both arms' and
+legs' three bones are required; Spine, Chest and Neck are placed on the line from the
+hips to the middle of the shoulders where the avatar lacks them. The rest pose is the
+file's node transforms (glTF) or the UsdSkel Skeleton's rest transforms, else its bind
+transforms (USD: the first Skeleton that is a humanoid's), in meters with +Y up; a
+model facing -Z (VRM 0.x) is turned to face +Z, as the retargeting expects.
 """
 
 from __future__ import annotations
 
-import re
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from samba.export.errors import ExportError
-from samba.export.gltf_reader import node_rest_positions, read_gltf
+from samba.export.gltf_reader import node_rest_positions, node_tree, read_gltf
 from samba.export.humanoid import BONE_INDEX, BONE_NAMES, HumanoidRig
+from samba.ingest import RigError, SkeletonTree, resolve_humanoid
 
 REQUIRED: tuple[str, ...] = tuple(
     name for name in BONE_NAMES if name not in ("Spine", "Chest", "Neck")
 )
 
-_ALIASES: dict[str, tuple[str, ...]] = {
-    "Hips": ("hips", "pelvis"),
-    "Spine": ("spine",),
-    "Chest": ("chest", "spine1"),
-    "Neck": ("neck",),
-    "Head": ("head",),
-    "LeftUpperArm": ("leftupperarm", "leftarm"),
-    "LeftLowerArm": ("leftlowerarm", "leftforearm"),
-    "LeftHand": ("lefthand",),
-    "RightUpperArm": ("rightupperarm", "rightarm"),
-    "RightLowerArm": ("rightlowerarm", "rightforearm"),
-    "RightHand": ("righthand",),
-    "LeftUpperLeg": ("leftupperleg", "leftupleg", "leftthigh"),
-    "LeftLowerLeg": ("leftlowerleg", "leftleg", "leftshin"),
-    "LeftFoot": ("leftfoot",),
-    "RightUpperLeg": ("rightupperleg", "rightupleg", "rightthigh"),
-    "RightLowerLeg": ("rightlowerleg", "rightleg", "rightshin"),
-    "RightFoot": ("rightfoot",),
-}
-"""Humanoid bone -> node names that mean it, in the normalised form `_plain` gives."""
+_NOT_HUMANOID = "avatar has no humanoid skeleton: "
 
 
 USD_SUFFIXES: tuple[str, ...] = (".usd", ".usda", ".usdc", ".usdz")
 """Suffixes (any letter case) of the avatars read as USD: `samba.export.usd_writer.SUFFIXES`,
 spelt out so that reading a glTF avatar does not load usd-core."""
-
-_MIXAMO_PREFIX = re.compile(r"^mixamorig\d*")
-"""Mixamo's bone-name prefix, as `_plain` leaves it of an underscored name."""
 
 MIN_BONE_M = 1e-3
 """Shortest bone (meters, rest pose) an avatar may have: a bone of zero length has no
@@ -79,17 +54,26 @@ def _gltf_bones(path: str | Path) -> dict[str, np.ndarray]:
     """Humanoid bone name -> rest position (3,) in meters of a glTF / VRM avatar's bones."""
     file = read_gltf(path)
     try:
-        nodes = _humanoid_nodes(file.doc)
+        nodes = _vrm_nodes(file.doc)
         world = node_rest_positions(file)
+        names, parents, keep = node_tree(file)
     except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
         raise ExportError(file.source, f"malformed glTF: {type(exc).__name__}: {exc}") from exc
-    return {name: world[node] for name, node in nodes.items()}
+    if nodes is not None:
+        return {name: world[node] for name, node in nodes.items()}
+    index = {node: i for i, node in enumerate(keep)}
+    tree = SkeletonTree(
+        tuple(names[n] for n in keep),
+        tuple(index.get(parents[n], -1) for n in keep),
+        world[keep],
+    )
+    return _resolved(tree, file.source)
 
 
 def _usd_bones(path: str | Path) -> dict[str, np.ndarray]:
-    """Humanoid bone name -> rest position (3,) in meters, +Y up, of the first humanoid
-    UsdSkel Skeleton of a USD avatar, its joints found by name; a Skeleton that cannot be
-    posed is passed over when another one is humanoid."""
+    """Humanoid bone name -> rest position (3,) in meters, +Y up, of the first UsdSkel
+    Skeleton of a USD avatar that the resolver finds a humanoid's; a Skeleton that cannot
+    be posed, or is no humanoid's, is passed over when another one is."""
     from samba.export.usd_reader import read_usd_skeleton_rests  # pxr loads only for USD avatars
 
     skeletons = read_usd_skeleton_rests(path)
@@ -98,18 +82,31 @@ def _usd_bones(path: str | Path) -> dict[str, np.ndarray]:
         if skeleton.problem is not None:
             reasons.append(skeleton.problem)
             continue
-        bones = {name: skeleton.positions[i] for name, i in _named_bones(skeleton.names).items()}
-        missing = _missing(bones)
-        if not missing or len(skeletons) == 1:
-            return bones  # `_rig` names the missing bones of a file's one skeleton
-        reasons.append(f"{skeleton.path}: no {', '.join(missing)}")
+        tree = SkeletonTree(skeleton.names, skeleton.parents, skeleton.positions)
+        try:
+            return _resolved(tree, str(path))
+        except ExportError as exc:
+            if len(skeletons) == 1:
+                raise
+            reasons.append(f"{skeleton.path}: {exc.problem.removeprefix(_NOT_HUMANOID)}")
     if len(skeletons) == 1:
         raise ExportError(str(path), reasons[0])
     raise ExportError(
         str(path),
-        f"avatar has no humanoid skeleton: none of its {len(skeletons)} skeletons has every "
-        f"bone ({'; '.join(reasons)})",
+        f"{_NOT_HUMANOID}none of its {len(skeletons)} skeletons is a humanoid's "
+        f"({'; '.join(reasons)})",
     )
+
+
+def _resolved(tree: SkeletonTree, source: str) -> dict[str, np.ndarray]:
+    """Humanoid bone name -> rest position (3,) of the bones the resolver finds in
+    `tree`; `ExportError` naming `source` and what could not be placed."""
+    try:
+        bones = resolve_humanoid(tree, source).bones
+    except RigError as exc:
+        problem = exc.problem.removeprefix("not a humanoid skeleton: ")
+        raise ExportError(source, f"{_NOT_HUMANOID}{problem}") from None
+    return {name: tree.positions[j] for name, j in bones.items() if name in BONE_INDEX}
 
 
 def _rig(source: str, bones: dict[str, np.ndarray]) -> HumanoidRig:
@@ -145,8 +142,8 @@ def _missing(bones: dict[str, np.ndarray]) -> list[str]:
     return [name for name in REQUIRED if name not in bones]
 
 
-def _humanoid_nodes(doc: dict[str, Any]) -> dict[str, int]:
-    """Humanoid bone name -> node index, from the VRM table or the node names."""
+def _vrm_nodes(doc: dict[str, Any]) -> dict[str, int] | None:
+    """Humanoid bone name -> node index from the VRM humanoid table; None without one."""
     extensions = doc.get("extensions") or {}
     nodes = doc.get("nodes", [])
     by_vrm_name = {name[0].lower() + name[1:]: name for name in BONE_NAMES}
@@ -157,32 +154,12 @@ def _humanoid_nodes(doc: dict[str, Any]) -> dict[str, int]:
         bones = extensions["VRM"].get("humanoid", {}).get("humanBones", [])
         pairs = [(b.get("bone", ""), b.get("node")) for b in bones]
     else:
-        return _named_bones([node.get("name", "") for node in nodes])
+        return None
     wanted = [(key, node) for key, node in pairs if key in by_vrm_name]
     for key, node in wanted:
         if not (isinstance(node, int) and 0 <= node < len(nodes)):
             raise ValueError(f"the VRM humanoid table puts {key} on node {node!r} of {len(nodes)}")
     return {by_vrm_name[key]: node for key, node in wanted}
-
-
-def _named_bones(names: Sequence[str]) -> dict[str, int]:
-    """Humanoid bone name -> index of the first of `names` (node or joint names) that
-    means it, by `_ALIASES`."""
-    wanted = {alias: name for name, aliases in _ALIASES.items() for alias in aliases}
-    found: dict[str, int] = {}
-    for i, node_name in enumerate(names):
-        name = wanted.get(_plain(node_name))
-        if name and name not in found:
-            found[name] = i
-    return found
-
-
-def _plain(name: str) -> str:
-    """A node or joint name without a "namespace:" prefix, case, spaces, underscores and
-    Mixamo's "mixamorig" prefix: Blender's USD export writes "mixamorig:Hips" as
-    "mixamorig_Hips", and some Mixamo downloads number it ("mixamorig1:Hips")."""
-    plain = name.rsplit(":", 1)[-1].replace("_", "").replace(" ", "").lower()
-    return _MIXAMO_PREFIX.sub("", plain)
 
 
 def _fill_spine(rest: np.ndarray) -> None:

@@ -282,6 +282,16 @@ def node_rest_positions(file: GltfDocument) -> np.ndarray:
     return np.array([world[i][:3, 3] for i in range(len(nodes))]).reshape(-1, 3)
 
 
+def node_tree(file: GltfDocument) -> tuple[tuple[str, ...], list[int], list[int]]:
+    """Node names, each node's parent (-1 for a root) and the nodes of the skeleton: the
+    skins' joints and their ancestors, or every node of a file without a skin."""
+    nodes = file.doc.get("nodes", [])
+    parents = _parents(nodes, file.source)
+    joints = [j for skin in file.doc.get("skins", []) for j in skin["joints"]]
+    keep = sorted({a for j in joints for a in _ancestry(parents, j)}) or list(range(len(nodes)))
+    return tuple(str(node.get("name", "")) for node in nodes), parents, keep
+
+
 def _joint_positions(file: GltfDocument) -> tuple[tuple[str, ...], np.ndarray]:
     """Joint names and world positions (n_keys, n_joints, 3) of a parsed file."""
     doc = file.doc

@@ -57,13 +57,15 @@ def read_usd_joint_positions(
 class SkeletonRest:
     """A UsdSkel Skeleton's rest pose: its prim `path`, the leaf `names` of its joint
     tokens (the last path component, in joint order) and the joints' world `positions`
-    (n_joints, 3) in meters, right-handed, +Y up; or, for a Skeleton that cannot be
-    posed, the `problem` (one line naming it) and no positions (0, 3)."""
+    (n_joints, 3) in meters, right-handed, +Y up, and their `parents`; or, for a Skeleton
+    that cannot be posed, the `problem` (one line naming it) and no positions (0, 3)."""
 
     path: str
     names: tuple[str, ...]
     positions: np.ndarray
     problem: str | None = None
+    parents: tuple[int, ...] = ()
+    """Each joint's parent joint (-1 for a root), from the joint tokens' paths."""
 
 
 def read_usd_skeleton_rests(path: str | os.PathLike[str]) -> list[SkeletonRest]:
@@ -90,7 +92,9 @@ def read_usd_skeleton_rests(path: str | os.PathLike[str]) -> list[SkeletonRest]:
         except ExportError as exc:
             rests.append(SkeletonRest(where, names, np.zeros((0, 3)), exc.problem))
             continue
-        rests.append(SkeletonRest(where, names, scale * world[:, 3, :3] @ to_y_up.T))
+        parents = tuple(int(p) for p in UsdSkel.Topology(tokens).GetParentIndices())
+        positions = scale * world[:, 3, :3] @ to_y_up.T
+        rests.append(SkeletonRest(where, names, positions, parents=parents))
     return rests
 
 

@@ -7,6 +7,7 @@ from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.errors import BvhError, RigError
 from samba.ingest.mcap_take import POSE_TOPIC, TAKE_METADATA, read_take
+from samba.ingest.resolver import HumanoidMap, SkeletonTree, name_kind, resolve_humanoid
 from samba.ingest.rigs import BUILTIN_RIGS, RigMap, detect_rig
 
 __all__ = [
@@ -18,13 +19,17 @@ __all__ = [
     "BvhImportOptions",
     "BvhJoint",
     "FileResult",
+    "HumanoidMap",
     "RigError",
     "RigMap",
+    "SkeletonTree",
     "detect_rig",
     "expand_paths",
     "import_paths",
     "load_bvh_take",
+    "name_kind",
     "parse_bvh",
     "read_bvh",
     "read_take",
+    "resolve_humanoid",
 ]

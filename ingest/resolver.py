@@ -110,8 +110,8 @@ _ACCEPTS: dict[str, set[str | None]] = {
 
 @dataclass(frozen=True)
 class SkeletonTree:
-    """A skeleton as the resolver sees it: joint `names`, `parents` (-1 for a root; every
-    parent before its children) and rest `positions` (n, 3) in any unit and frame."""
+    """A skeleton as the resolver sees it: joint `names`, `parents` (-1 for a root) and
+    rest `positions` (n, 3) in any unit and frame."""
 
     names: tuple[str, ...]
     parents: tuple[int, ...]
@@ -222,9 +222,18 @@ class _Resolution:
 
     def run(self) -> HumanoidMap:
         """Ends, chains, trunk, checks."""
-        if self.n < 8 or self.size <= 0:
+        if self.n < 8:
             raise self.fail(f"{self.n} joints, too few for arms, legs and a head")
-        ends = self._named_ends() or self._structural_ends()
+        if not self.size > 0:
+            raise self.fail("its joints all stand at one point (scaled to nothing?)")
+        ends, unnamed = self._named_ends()
+        if unnamed:
+            try:
+                ends = self._structural_ends()
+            except RigError as exc:  # say what the names lacked as well
+                where = " and ".join(_words(bone) for bone in unnamed)
+                problem = exc.problem.removeprefix("not a humanoid skeleton: ")
+                raise self.fail(f"no joint is named for the {where}, and {problem}") from None
         bones: dict[str, int] = {}
         evidence: dict[str, str] = {}
         for limb, pair in (("arm", "Hand"), ("leg", "Foot")):
@@ -250,20 +259,22 @@ class _Resolution:
 
     # -- the limbs' ends ---------------------------------------------------------------
 
-    def _named_ends(self) -> dict[str, int] | None:
-        """Hands and feet (and the head) by name: per side the named hand (foot) nearest
-        the root; None when a hand or a foot has no name."""
+    def _named_ends(self) -> tuple[dict[str, int], list[str]]:
+        """Hands and feet (and the head) by name, per side the named one nearest the root,
+        and the hands and feet no name gives."""
         ends: dict[str, int] = {}
+        unnamed = []
         for kind, bone in (("hand", "Hand"), ("foot", "Foot")):
             for side in SIDES:
                 found = [j for j, k in enumerate(self.kinds) if k.kind == kind and k.side == side]
-                if not found:
-                    return None
-                ends[side + bone] = min(found, key=self._depth)
+                if found:
+                    ends[side + bone] = min(found, key=self._depth)
+                else:
+                    unnamed.append(side + bone)
         heads = [j for j, k in enumerate(self.kinds) if k.kind == "head"]
         if heads:
             ends["Head"] = min(heads, key=self._depth)
-        return ends
+        return ends, unnamed
 
     def _structural_ends(self) -> dict[str, int]:
         """The five limb ends from the tree alone: the tips of its long branches, the head
@@ -279,7 +290,7 @@ class _Resolution:
         if len(tips) != 5:
             raise self.fail(
                 f"its tree has {len(tips)} long branches where a humanoid has 5 (head, two "
-                "arms, two legs); name the hands and feet"
+                "arms, two legs)"
             )
         top = tips[0]
         for tip in tips[1:]:
@@ -309,8 +320,9 @@ class _Resolution:
         for end in pair:
             sides = [self.kinds[j].side for j in self._ancestors(end)[:4] if self.kinds[j].side]
             votes.append(sides[0] if sides else None)
-        if set(votes) == {"Left", "Right"}:
-            return (pair[0], pair[1]) if votes[0] == "Left" else (pair[1], pair[0])
+        if set(votes) in ({"Left", "Right"}, {"Left", None}, {"Right", None}):
+            first_left = votes[0] == "Left" or votes[1] == "Right"
+            return (pair[0], pair[1]) if first_left else (pair[1], pair[0])
         toes = [c for f in feet for c in self.children[f]]
         if not toes:
             raise self.fail("left and right cannot be told apart: no side in the names and "
@@ -369,8 +381,8 @@ class _Resolution:
     def _spine(self, bones: dict[str, int]) -> None:
         """Spine, Chest and Neck by name, in place: on the trunk from the hips' branch
         point up to the arms' (the structural chest, which leaves `bones` unless it is
-        named), the first spine bone and the first named chest ("chest", "spine1"), and
-        the last neck bone above the head."""
+        named), the first spine bone, the first named chest after it ("chest", "spine1") or
+        else the second spine bone, and the neck bone nearest the head."""
         chest, head = bones.pop("Chest"), bones["Head"]
         above_hips = {bones["Hips"], *self._ancestors(bones["Hips"])}
         trunk = []
@@ -382,8 +394,8 @@ class _Resolution:
         spine = [j for j in trunk if self.kinds[j].kind == "spine"]
         if spine:
             bones["Spine"] = spine[0]
-        chests = [j for j in spine if _is_chest(self.tree.names[j])]
-        if chests:
+        chests = [j for j in spine[1:] if _is_chest(self.tree.names[j])] or spine[1:2]
+        if chests:  # a bone named chest ("spine1" after "spine"), else the second spine bone
             bones["Chest"] = chests[0]
         neck = [j for j in self._ancestors(head) if self.kinds[j].kind == "neck"]
         if neck:
@@ -456,7 +468,7 @@ class _Resolution:
     def _reach(self) -> np.ndarray:
         """Per joint, the longest path (rest lengths) down to any joint below it."""
         reach = np.zeros(self.n)
-        for j in reversed(range(self.n)):
+        for j in sorted(range(self.n), key=self._depth, reverse=True):  # children first
             p = self.tree.parents[j]
             if p >= 0:
                 length = np.linalg.norm(self.positions[j] - self.positions[p])

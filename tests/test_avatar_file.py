@@ -87,7 +87,7 @@ def test_an_avatar_scaled_to_nothing_is_refused(tmp_path: Path, avatar_glb: byte
         doc["nodes"][0]["scale"] = [0.0, 0.0, 0.0]  # every bone of zero length
 
     path = _saved(tmp_path, with_json(avatar_glb, flattened))
-    with pytest.raises(ExportError, match="bones of \\(nearly\\) zero length: Spine") as caught:
+    with pytest.raises(ExportError, match="joints all stand at one point") as caught:
         read_avatar_rig(path)
     assert str(path) in str(caught.value)
 
@@ -144,18 +144,34 @@ def test_a_take_on_the_avatar_keeps_directions_and_the_avatars_proportions(
     np.testing.assert_allclose(thigh, np.linalg.norm(rig.rest[12] - rig.rest[11]), atol=1e-9)
 
 
-def test_an_avatar_without_a_humanoid_skeleton_names_the_missing_bones(
+def test_an_avatar_whose_left_bones_no_name_says_is_read_by_its_structure(
     tmp_path: Path, avatar_glb: bytes
 ) -> None:
+    """"LeftUpperArm" renamed "bone_UpperArm" (no side in the name): the resolver places
+    the left limbs by the tree, opposite the named right ones, and the rig is the same."""
+
     def rename(doc: dict) -> None:
         for node in doc["nodes"]:
             if node.get("name", "").startswith("Left"):
                 node["name"] = "bone_" + node["name"][4:]
 
     path = _saved(tmp_path, with_json(avatar_glb, rename))
-    with pytest.raises(ExportError, match="no humanoid skeleton: no bone for LeftUpperArm") as e:
+    np.testing.assert_allclose(read_avatar_rig(path).rest, AVATAR_RIG.rest, atol=1e-6)
+
+
+def test_an_avatar_that_is_no_humanoid_is_refused_saying_why(
+    tmp_path: Path, avatar_glb: bytes
+) -> None:
+    def legs_forward(doc: dict) -> None:  # legs held out along the spine: no humanoid
+        for node in doc["nodes"]:
+            if node.get("name") in ("LeftUpperLeg", "RightUpperLeg"):
+                node["rotation"] = [-0.9238795, 0.0, 0.0, 0.3826834]  # 135 degrees about -X
+
+    path = _saved(tmp_path, with_json(avatar_glb, legs_forward))
+    with pytest.raises(ExportError) as e:
         read_avatar_rig(path)
     assert e.value.source == str(path)
+    assert e.value.problem.startswith("avatar has no humanoid skeleton: the left leg does not")
 
 
 @pytest.mark.parametrize(
@@ -279,19 +295,20 @@ def test_usd_avatars_without_a_humanoid_skeleton_are_named(tmp_path: Path) -> No
     UsdGeom.Xform.Define(plain, "/World")
     plain.Save()
     tokens, positions = _turned_skeleton(AVATAR_RIG)
-    no_arms = [t.replace("LeftUpperArm", "LeftShoulderPad") for t in tokens]
-    _usd_avatar(tmp_path / "armless.usda", [(no_arms, positions)], "rest")
+    no_arms = [t for t in tokens if "Arm" not in t and "Hand" not in t]
+    kept = [i for i, t in enumerate(tokens) if t in no_arms]
+    _usd_avatar(tmp_path / "armless.usda", [(no_arms, positions[kept])], "rest")
     prop = (["Sword", "Sword/Blade"], np.array([[0.0, 1.0, 0.0], [0.0, 1.5, 0.0]]))
-    _usd_avatar(tmp_path / "two.usda", [prop, (no_arms, positions)], "bind")
+    _usd_avatar(tmp_path / "two.usda", [prop, (no_arms, positions[kept])], "bind")
     _usd_avatar(tmp_path / "nothing.usda", [(tokens, positions)], "none")
     (tmp_path / "text.usda").write_text("Hips 0 0 0\n")
     problems = {
         "plain.usda": ["no UsdSkel Skeleton prim in the file"],
-        "armless.usda": ["avatar has no humanoid skeleton: no bone for LeftUpperArm"],
+        "armless.usda": ["avatar has no humanoid skeleton: "],
         "two.usda": [
-            "avatar has no humanoid skeleton: none of its 2 skeletons has every bone "
-            "(/Character/Skel0: no Hips, Head, LeftUpperArm, ",
-            "; /Character/Skel1: no LeftUpperArm)",
+            "avatar has no humanoid skeleton: none of its 2 skeletons is a humanoid's "
+            "(/Character/Skel0: 2 joints, too few for arms, legs and a head; "
+            "/Character/Skel1: ",
         ],
         "nothing.usda": [
             "skeleton /Character/Skel0 has no restTransforms or bindTransforms for its 18 joints"
@@ -322,7 +339,7 @@ def test_a_usd_skeleton_that_cannot_be_posed_is_passed_over(tmp_path: Path) -> N
     _usd_avatar(broken, [(tokens, positions), (tokens, positions)], "none")
     with pytest.raises(ExportError) as raised:
         read_avatar_rig(broken)
-    assert "none of its 2 skeletons has every bone" in raised.value.problem
+    assert "none of its 2 skeletons is a humanoid's" in raised.value.problem
     assert "skeleton /Character/Skel1 has no restTransforms" in raised.value.problem
 
 
