@@ -3,7 +3,7 @@ user's USD / glTF / VRM avatar), live for VMC and offline for takes, and the USD
 and BVH writers (`samba export`).
 """
 
-from samba.export.avatar_file import read_avatar_rig
+from samba.export.avatar_file import avatar_humanoid, read_avatar_rig
 from samba.export.bvh_writer import UNITS, BvhSkeleton, write_bvh_motion
 from samba.export.gltf_writer import write_glb
 from samba.export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
@@ -22,6 +22,7 @@ __all__ = [
     "HumanoidMotion",
     "HumanoidRig",
     "LiveRetarget",
+    "avatar_humanoid",
     "load_avatar",
     "mannequin",
     "read_avatar_rig",

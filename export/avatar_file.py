@@ -14,21 +14,23 @@ model facing -Z (VRM 0.x) is turned to face +Z, as the retargeting expects.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from samba.export.errors import ExportError
 from samba.export.gltf_reader import node_rest_positions, node_tree, read_gltf
 from samba.export.humanoid import BONE_INDEX, BONE_NAMES, HumanoidRig
-from samba.ingest import RigError, SkeletonTree, resolve_humanoid
+from samba.ingest import HumanoidMap, RigError, SkeletonTree, resolve_humanoid
 
 REQUIRED: tuple[str, ...] = tuple(
     name for name in BONE_NAMES if name not in ("Spine", "Chest", "Neck")
 )
 
 _NOT_HUMANOID = "avatar has no humanoid skeleton: "
+T = TypeVar("T")
 
 
 USD_SUFFIXES: tuple[str, ...] = (".usd", ".usda", ".usdc", ".usdz")
@@ -42,38 +44,51 @@ direction to turn, and retargeting onto it divides by zero."""
 
 def read_avatar_rig(path: str | Path) -> HumanoidRig:
     """The humanoid rig of the avatar file at `path`, rest pose (17, 3) in meters, +Y up,
-    facing +Z. USD (.usd, .usda, .usdc, .usdz) by its suffix, any other file as glTF: binary
-    (.glb, .vrm) or JSON (.gltf), told apart by content. Raises `ExportError` naming the
-    file when it cannot be read or has no humanoid skeleton (listing the bones that are
-    missing)."""
-    is_usd = Path(path).suffix.lower() in USD_SUFFIXES
-    return _rig(str(path), _usd_bones(path) if is_usd else _gltf_bones(path))
+    facing +Z. USD (.usd, .usda, .usdc, .usdz) by its suffix, any other file as glTF:
+    binary (.glb, .vrm) or JSON (.gltf), told apart by content. Raises `ExportError`
+    naming the file when it cannot be read or has no humanoid skeleton (saying what
+    could not be placed)."""
+    source = str(path)
+    if Path(path).suffix.lower() not in USD_SUFFIXES:
+        file = read_gltf(path)
+        nodes = _malformed_is_named(file.source, _vrm_nodes, file.doc)
+        if nodes is not None:  # a VRM file says where its bones are
+            world = _malformed_is_named(file.source, node_rest_positions, file)
+            return _rig(source, {name: world[node] for name, node in nodes.items()})
+    humanoid = avatar_humanoid(path)
+    positions = humanoid.tree.positions
+    bones = {name: positions[j] for name, j in humanoid.bones.items() if name in BONE_INDEX}
+    return _rig(source, bones)
 
 
-def _gltf_bones(path: str | Path) -> dict[str, np.ndarray]:
-    """Humanoid bone name -> rest position (3,) in meters of a glTF / VRM avatar's bones."""
+def avatar_humanoid(path: str | Path) -> HumanoidMap:
+    """The humanoid resolver's map of the avatar's skeleton (`samba.ingest.HumanoidMap`,
+    positions in meters, +Y up): of a glTF file, the skins' joints and their ancestors;
+    of a USD file, the first UsdSkel Skeleton that is a humanoid's (a Skeleton that
+    cannot be posed, or is no humanoid's, is passed over when another one is). Raises
+    `ExportError` naming the file and what could not be placed."""
+    if Path(path).suffix.lower() in USD_SUFFIXES:
+        return _usd_humanoid(path)
     file = read_gltf(path)
-    try:
-        nodes = _vrm_nodes(file.doc)
-        world = node_rest_positions(file)
-        names, parents, keep = node_tree(file)
-    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
-        raise ExportError(file.source, f"malformed glTF: {type(exc).__name__}: {exc}") from exc
-    if nodes is not None:
-        return {name: world[node] for name, node in nodes.items()}
+    names, parents, keep = _malformed_is_named(file.source, node_tree, file)
+    world = _malformed_is_named(file.source, node_rest_positions, file)
     index = {node: i for i, node in enumerate(keep)}
     tree = SkeletonTree(
-        tuple(names[n] for n in keep),
-        tuple(index.get(parents[n], -1) for n in keep),
-        world[keep],
+        tuple(names[n] for n in keep), tuple(index.get(parents[n], -1) for n in keep), world[keep]
     )
     return _resolved(tree, file.source)
 
 
-def _usd_bones(path: str | Path) -> dict[str, np.ndarray]:
-    """Humanoid bone name -> rest position (3,) in meters, +Y up, of the first UsdSkel
-    Skeleton of a USD avatar that the resolver finds a humanoid's; a Skeleton that cannot
-    be posed, or is no humanoid's, is passed over when another one is."""
+def _malformed_is_named(source: str, read: Callable[[Any], T], what: Any) -> T:
+    """`read(what)`, with the errors of a malformed glTF document as `ExportError`."""
+    try:
+        return read(what)
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+        raise ExportError(source, f"malformed glTF: {type(exc).__name__}: {exc}") from exc
+
+
+def _usd_humanoid(path: str | Path) -> HumanoidMap:
+    """`avatar_humanoid` of a USD file."""
     from samba.export.usd_reader import read_usd_skeleton_rests  # pxr loads only for USD avatars
 
     skeletons = read_usd_skeleton_rests(path)
@@ -98,15 +113,14 @@ def _usd_bones(path: str | Path) -> dict[str, np.ndarray]:
     )
 
 
-def _resolved(tree: SkeletonTree, source: str) -> dict[str, np.ndarray]:
-    """Humanoid bone name -> rest position (3,) of the bones the resolver finds in
-    `tree`; `ExportError` naming `source` and what could not be placed."""
+def _resolved(tree: SkeletonTree, source: str) -> HumanoidMap:
+    """The resolver's map of `tree`; `ExportError` naming `source` and what could not be
+    placed."""
     try:
-        bones = resolve_humanoid(tree, source).bones
+        return resolve_humanoid(tree, source)
     except RigError as exc:
         problem = exc.problem.removeprefix("not a humanoid skeleton: ")
         raise ExportError(source, f"{_NOT_HUMANOID}{problem}") from None
-    return {name: tree.positions[j] for name, j in bones.items() if name in BONE_INDEX}
 
 
 def _rig(source: str, bones: dict[str, np.ndarray]) -> HumanoidRig:

@@ -8,10 +8,11 @@ from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.errors import BvhError, RigError
 from samba.ingest.mcap_take import POSE_TOPIC, TAKE_METADATA, read_take
 from samba.ingest.resolver import HumanoidMap, SkeletonTree, name_kind, resolve_humanoid
-from samba.ingest.rigs import BUILTIN_RIGS, RigMap, detect_rig
+from samba.ingest.rigs import BUILTIN_RIGS, DETECTED, RigMap, detect_rig, rig_of
 
 __all__ = [
     "BUILTIN_RIGS",
+    "DETECTED",
     "POSE_TOPIC",
     "TAKE_METADATA",
     "BvhError",
@@ -32,4 +33,5 @@ __all__ = [
     "read_bvh",
     "read_take",
     "resolve_humanoid",
+    "rig_of",
 ]

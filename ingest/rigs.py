@@ -21,6 +21,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+import tomli_w
+
 from samba.body import JOINT_NAMES
 from samba.ingest.errors import RigError
 from samba.ingest.resolver import SkeletonTree, resolve_humanoid
@@ -52,6 +54,12 @@ class RigMap:
             else:
                 found.append(hit)
         return found, missing
+
+    def toml(self) -> str:
+        """The map as the TOML mapping file `from_toml` reads (and `--map` takes)."""
+        joints = {ours: names[0] if len(names) == 1 else list(names)
+                  for ours, names in zip(JOINT_NAMES, self.joints, strict=True)}
+        return tomli_w.dumps({"name": self.name, "joints": joints})
 
     @classmethod
     def from_toml(cls, path: str | Path) -> RigMap:
@@ -208,7 +216,12 @@ def detect_rig(tree: SkeletonTree, source: str) -> tuple[RigMap, list[int]]:
         raise RigError(
             source, f"unknown rig: {exc.problem}; pass a mapping file with --map"
         ) from None
-    return RigMap(name=DETECTED, joints=tuple((names[j],) for j in joints)), joints
+    return rig_of(tree, joints, DETECTED), joints
+
+
+def rig_of(tree: SkeletonTree, joints: list[int], name: str) -> RigMap:
+    """The `RigMap` named `name` that maps the 13 joints to `tree`'s joints `joints`."""
+    return RigMap(name=name, joints=tuple((tree.names[j],) for j in joints))
 
 
 def map_rig(

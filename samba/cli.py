@@ -33,9 +33,17 @@ from samba.cameras import (
 from samba.db import PoseIndex
 from samba.db import cli as store_cli
 from samba.evaluation import document, evaluate, report_text, sweep_points, write_plots
+from samba.export import avatar_humanoid
 from samba.export import cli as export_cli
 from samba.ingest import cli as import_cli
-from samba.ingest import expand_paths, load_bvh_take
+from samba.ingest import (
+    detect_rig,
+    expand_paths,
+    load_bvh_take,
+    read_bvh,
+    resolve_humanoid,
+    rig_of,
+)
 from samba.reconstruct import METHODS, method
 from samba.service.cli import capture_volume, demo, node, serve, track_video
 
@@ -47,6 +55,39 @@ def _register_db(parser: argparse.ArgumentParser) -> None:
     store_cli.add_create_action(actions)
     import_cli.add_import_action(actions)
     store_cli.add_store_actions(actions)
+    rig = actions.add_parser(
+        "rig",
+        help="show which joint of a BVH file's or an avatar's skeleton is each humanoid bone",
+        description="Map a skeleton's joints to the humanoid bones (samba.ingest.resolver: "
+        "names and tree together) and print the mapping with the evidence per bone; "
+        "--write-map saves the 13 joints as the mapping file samba db import --map reads.",
+    )
+    rig.add_argument("file", help="a BVH file, or an avatar (.glb, .gltf, .vrm, .usd*)")
+    rig.add_argument(
+        "--write-map", metavar="OUT.toml", help="write the 13-joint mapping file (never overwrites)"
+    )
+    rig.set_defaults(run=_rig)
+
+
+def _rig(args: argparse.Namespace) -> int:
+    path = Path(args.file)
+    if args.write_map and Path(args.write_map).exists():
+        raise InputError(args.write_map, "already exists; mapping files are never overwritten")
+    if path.suffix.lower() == ".bvh":
+        tree = read_bvh(path).skeleton()
+        rig, _ = detect_rig(tree, str(path))
+        humanoid = resolve_humanoid(tree, str(path))
+        found = f"rig {rig.name}"
+    else:
+        humanoid = avatar_humanoid(path)
+        found = "an avatar"
+    print(f"{path}: {found}, {len(humanoid.tree.names)} joints")
+    print(humanoid.report())
+    if args.write_map:
+        mapping = rig_of(humanoid.tree, humanoid.capture_joints, path.stem)
+        write_text_atomic(args.write_map, mapping.toml())
+        print(f"wrote {args.write_map}")
+    return 0
 
 
 def _register_eval(parser: argparse.ArgumentParser) -> None:
@@ -250,7 +291,7 @@ def _calibrate(args: argparse.Namespace) -> int:
 AREAS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], str]] = {
     "db": (
         _register_db,
-        "pose database: init, import, ls, show, label, rm, verify, stats, tree, query",
+        "pose database: init, import, ls, show, label, rm, verify, stats, tree, query, rig",
     ),
     "eval": (_register_eval, "accuracy and speed of every reconstruction method on BVH takes"),
     "calibrate": (_register_calibrate, "calibrate cameras from images or videos of a board"),

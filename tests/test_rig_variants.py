@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 from rig_variants import CONVENTIONS, STRUCTURES, variant
 
+from samba.cli import main
 from samba.ingest.bvh import read_bvh
-from samba.ingest.bvh_take import load_bvh_take
+from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.errors import RigError
+from samba.ingest.rigs import RigMap
 
 RIGS = ("cgspeed_131_01", "iclone_002_01", "daz_salsa_01")
 VARIANTS = [(name, ()) for name in CONVENTIONS] + [
@@ -116,3 +118,23 @@ def test_a_skeleton_that_is_not_a_humanoids_is_refused_saying_why(
         load_bvh_take(path)
     assert str(err.value).startswith(f"{path}: unknown rig: not a humanoid skeleton: ")
     assert problem in str(err.value) and "--map" in str(err.value)
+
+
+def test_db_rig_shows_the_mapping_and_writes_the_map_import_takes(
+    cmu_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`samba db rig FILE --write-map OUT`: the game-studio rename of the Daz rig, its
+    bones with their evidence; the written map imports the file as detection does."""
+    path = tmp_path / "studio.bvh"
+    path.write_text(variant(read_bvh(cmu_dir / "daz_salsa_01.bvh"), "game studio"))
+    mapping = tmp_path / "studio.toml"
+    assert main(["db", "rig", str(path), "--write-map", str(mapping)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"{path}: rig detected, 57 joints\n")
+    assert "LeftUpperArm   UpperArm_L  name and structure" in out
+    assert f"wrote {mapping}" in out
+    mapped = load_bvh_take(path, BvhImportOptions(rig=RigMap.from_toml(mapping)))
+    assert mapped.rig == "studio"
+    np.testing.assert_array_equal(mapped.poses, load_bvh_take(path).poses)
+    assert main(["db", "rig", str(path), "--write-map", str(mapping)]) == 1
+    assert "already exists" in capsys.readouterr().err
