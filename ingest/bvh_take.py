@@ -83,7 +83,7 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
     except OSError as exc:
         raise BvhError(source, f"cannot read file: {exc.strerror or exc}") from exc
     bvh = parse_bvh(data, source=source)
-    rig, joints = map_rig(bvh.skeleton(), source, options.rig)
+    rig, joints = map_rig(bvh.names, source, bvh.skeleton, options.rig)
     if options.skip_frames >= bvh.n_frames:
         raise BvhError(
             source, f"--skip-frames {options.skip_frames} drops all {bvh.n_frames} frames"

@@ -18,6 +18,7 @@ that fails, or to override it, by a TOML file:
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -194,15 +195,17 @@ def rig_by_name(name: str) -> RigMap:
     raise RigError("--rig", f"unknown rig {name!r}; built-in rigs are {known}")
 
 
-def detect_rig(tree: SkeletonTree, source: str) -> tuple[RigMap, list[int]]:
-    """The rig of `tree` and the indices of its 13 joints: the first built-in rig that
-    maps all 13 by name, else the humanoid resolver's mapping (rig `DETECTED`).
+def detect_rig(
+    names: tuple[str, ...], source: str, skeleton: Callable[[], SkeletonTree]
+) -> tuple[RigMap, list[int]]:
+    """The rig of a skeleton with joint `names` and the indices of its 13 joints: the first
+    built-in rig that maps all 13 by name, else the humanoid resolver's mapping of the
+    tree `skeleton()` gives (rig `DETECTED`; the tree is only built then).
 
     Mixamo is only chosen when the names carry the `mixamorig` prefix, since after the
     prefix its names equal MotionBuilder's. Raises `RigError` naming `source` and what
     the resolver could not place.
     """
-    names = tree.names
     mixamo = any(n.lower().startswith("mixamorig") for n in names)
     for rig in BUILTIN_RIGS:
         if (rig.name == "mixamo") != mixamo and rig.name in ("mixamo", "motionbuilder"):
@@ -210,6 +213,7 @@ def detect_rig(tree: SkeletonTree, source: str) -> tuple[RigMap, list[int]]:
         found, missing = rig.resolve(names)
         if not missing:
             return rig, found
+    tree = skeleton()
     try:
         joints = resolve_humanoid(tree, source).capture_joints
     except RigError as exc:
@@ -225,13 +229,16 @@ def rig_of(tree: SkeletonTree, joints: list[int], name: str) -> RigMap:
 
 
 def map_rig(
-    tree: SkeletonTree, source: str, rig: RigMap | None = None
+    names: tuple[str, ...],
+    source: str,
+    skeleton: Callable[[], SkeletonTree],
+    rig: RigMap | None = None,
 ) -> tuple[RigMap, list[int]]:
-    """Indices into `tree`'s joints of the 13 joints, by `rig` when given (a user's map
-    wins over detection), else by `detect_rig`."""
+    """Indices into `names` of the 13 joints, by `rig` when given (a user's map wins over
+    detection), else by `detect_rig`."""
     if rig is None:
-        return detect_rig(tree, source)
-    found, missing = rig.resolve(tree.names)
+        return detect_rig(names, source, skeleton)
+    found, missing = rig.resolve(names)
     if missing:
         raise RigError(source, f"rig {rig.name!r} cannot map: {'; '.join(missing)}")
     return rig, found

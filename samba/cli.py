@@ -74,8 +74,9 @@ def _rig(args: argparse.Namespace) -> int:
     if args.write_map and Path(args.write_map).exists():
         raise InputError(args.write_map, "already exists; mapping files are never overwritten")
     if path.suffix.lower() == ".bvh":
-        tree = read_bvh(path).skeleton()
-        rig, _ = detect_rig(tree, str(path))
+        bvh = read_bvh(path)
+        tree = bvh.skeleton()
+        rig, _ = detect_rig(bvh.names, str(path), lambda: tree)
         humanoid = resolve_humanoid(tree, str(path))
         found = f"rig {rig.name}"
     else:

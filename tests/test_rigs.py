@@ -86,7 +86,7 @@ def test_builtin_rig_is_detected_and_imported(tmp_path: Path, rig: str) -> None:
 def test_detect_rig_finds_the_13_joints_by_name(rig: str) -> None:
     fixture = make_humanoid(rig, frames=2)
     names = parse_bvh(fixture.text).names
-    found_rig, joints = detect_rig(_tree(names), "x.bvh")
+    found_rig, joints = detect_rig(names, "x.bvh", lambda: _tree(names))
     assert found_rig.name == rig
     wanted = [rig_names(rig)[k] for k in MAPPED_KEYS]
     assert [names[j] for j in joints] == wanted
@@ -103,7 +103,7 @@ def test_mixamo_namespace_variants(tmp_path: Path, prefix: str) -> None:
 
 def test_motionbuilder_names_without_prefix_are_not_mixamo() -> None:
     names = parse_bvh(make_humanoid("motionbuilder", frames=2).text).names
-    assert detect_rig(_tree(names), "x.bvh")[0].name == "motionbuilder"
+    assert detect_rig(names, "x.bvh", lambda: _tree(names))[0].name == "motionbuilder"
 
 
 def test_daz_genesis_bend_joints(tmp_path: Path) -> None:
@@ -126,7 +126,7 @@ def test_daz_genesis_bend_joints(tmp_path: Path) -> None:
 )
 def test_names_match_ignoring_case_underscores_and_spaces(spell) -> None:
     names = tuple(spell(n) for n in parse_bvh(make_humanoid("cmu-max", frames=2).text).names)
-    rig, joints = detect_rig(_tree(names), "x.bvh")
+    rig, joints = detect_rig(names, "x.bvh", lambda: _tree(names))
     assert rig.name == "cmu-max"
     assert names[joints[JOINT_NAMES.index("l_elbow")]] == spell("LeftElbow")
 
@@ -168,7 +168,7 @@ def test_mapping_file_name_defaults_to_its_stem_and_accepts_lists(tmp_path: Path
     assert rig.name == "studio-b"
     assert rig.joints[0] == ("Kopf", "Bone_Skull")
     names = parse_bvh(make_humanoid(CUSTOM, frames=2).text).names
-    _, joints = map_rig(_tree(names), "x.bvh", rig)
+    _, joints = map_rig(names, "x.bvh", lambda: _tree(names), rig)
     assert names[joints[0]] == "Bone_Skull"
 
 
