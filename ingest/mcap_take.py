@@ -40,7 +40,8 @@ def read_take(path: str | Path) -> Take:
     recorded capture times longer than `GAP_PERIODS` frame periods) the take is resampled
     on the recorded timestamps to a regular grid at its fps, interpolating the poses
     across gaps up to `MAX_INTERPOLATED_GAP_S` and holding the last pose across longer
-    ones, with a warning in `Take.warnings` saying what was done.
+    ones, with a warning in `Take.warnings` saying what was done; `Take.source_frames`
+    counts the frames recorded.
 
     A file cut short (no footer) gives the frames before the cut, with a warning in
     `Take.warnings` saying so and how many frames were recovered. Raises `TakeFileError`
@@ -98,6 +99,7 @@ def read_take(path: str | Path) -> Take:
     return Take(
         name=meta.get("name") or path.stem,
         poses=recorded,
+        source_frames=len(poses),
         fps=fps,
         source=str(path.resolve()),
         rig="live",

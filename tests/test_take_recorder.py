@@ -279,7 +279,7 @@ def test_a_take_with_dropped_frames_keeps_its_recorded_timing(
             estimate = PoseEstimate(take.poses[i], 0.004, 8, True, False)
             recorder.write_frame(frame_time(i), estimate, markers_of(take.poses[i]))
     read = read_take(path)
-    assert len(read) == len(take) and read.fps == take.fps
+    assert len(read) == len(take) and read.fps == take.fps and read.source_frames == len(kept)
     (warning,) = read.warnings
     assert warning.startswith("2 gaps of dropped frames (longest 0.70 s, about 30 frames")
     assert "the last pose held across 1 longer" in warning
