@@ -36,54 +36,39 @@ def track_video(
     and asking whether the empty stage (`empty_stage`, the flag that gave it) is free of
     people; a video with nobody in any frame raises InputError naming it. A failure
     leaves no take behind."""
+    size = tracker.tree.view.size
+    seconds, held = [], 0
     try:
-        seconds, held = _track(frames, extractor, tracker, out, fps, video, empty_stage)
+        with TakeRecorder(out, fps) as recorder:
+            for number, frame in frames:
+                start = time.perf_counter()
+                mask = extractor.silhouette(frame)
+                if not seconds and not mask.any():
+                    continue  # nobody in view yet
+                if mask.shape != size[::-1]:
+                    mask = downsampled(mask, size)
+                try:
+                    estimate = tracker.step(mask)
+                except InputError as exc:
+                    raise InputError(
+                        video,
+                        f"frame {number}: the silhouette cannot be placed ({exc.problem}); is the "
+                        f"empty stage ({empty_stage}) free of people and of the same view?",
+                    ) from exc
+                seconds.append(time.perf_counter() - start)
+                held += not estimate.found
+                recorder.write_frame(
+                    round(number / fps * 1e9),
+                    PoseEstimate(
+                        estimate.pose, estimate.distance, 0, estimate.found, not estimate.found
+                    ),
+                    np.full((N_MARKERS, 3), np.nan),
+                )
+        if not seconds:
+            raise InputError(video, "nobody was seen in any frame")
     except BaseException:
         out.unlink(missing_ok=True)
         raise
-    if not seconds:
-        out.unlink(missing_ok=True)
-        raise InputError(video, "nobody was seen in any frame")
-    return seconds, held
-
-
-def _track(
-    frames: Iterator[tuple[int, np.ndarray]],
-    extractor: SilhouetteExtractor,
-    tracker: SilhouetteTracker,
-    out: Path,
-    fps: float,
-    video: str,
-    empty_stage: str,
-) -> tuple[list[float], int]:
-    """`track_video`'s frame loop, without the clean-up of `out` on failure."""
-    size = tracker.tree.view.size
-    seconds, held = [], 0
-    with TakeRecorder(out, fps) as recorder:
-        for number, frame in frames:
-            start = time.perf_counter()
-            mask = extractor.silhouette(frame)
-            if not seconds and not mask.any():
-                continue  # nobody in view yet
-            if mask.shape != size[::-1]:
-                mask = downsampled(mask, size)
-            try:
-                estimate = tracker.step(mask)
-            except InputError as exc:
-                raise InputError(
-                    video,
-                    f"frame {number}: the silhouette cannot be placed ({exc.problem}); is the "
-                    f"empty stage ({empty_stage}) free of people and of the same view?",
-                ) from exc
-            seconds.append(time.perf_counter() - start)
-            held += not estimate.found
-            recorder.write_frame(
-                round(number / fps * 1e9),
-                PoseEstimate(
-                    estimate.pose, estimate.distance, 0, estimate.found, not estimate.found
-                ),
-                np.full((N_MARKERS, 3), np.nan),
-            )
     return seconds, held
 
 
