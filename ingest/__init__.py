@@ -5,7 +5,9 @@
 from samba.ingest.batch import FileResult, expand_paths, import_paths
 from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
-from samba.ingest.errors import BvhError, RigError
+from samba.ingest.c3d_take import MarkerTake, read_c3d
+from samba.ingest.errors import BvhError, C3dError, RigError
+from samba.ingest.marker_sets import PLUG_IN_GAIT, MarkerSet
 from samba.ingest.mcap_take import POSE_TOPIC, TAKE_METADATA, read_take
 from samba.ingest.resolver import HumanoidMap, SkeletonTree, name_kind, resolve_humanoid
 from samba.ingest.rigs import BUILTIN_RIGS, DETECTED, RigMap, detect_rig, rig_of
@@ -13,14 +15,18 @@ from samba.ingest.rigs import BUILTIN_RIGS, DETECTED, RigMap, detect_rig, rig_of
 __all__ = [
     "BUILTIN_RIGS",
     "DETECTED",
+    "PLUG_IN_GAIT",
     "POSE_TOPIC",
     "TAKE_METADATA",
     "BvhError",
     "BvhFile",
     "BvhImportOptions",
     "BvhJoint",
+    "C3dError",
     "FileResult",
     "HumanoidMap",
+    "MarkerSet",
+    "MarkerTake",
     "RigError",
     "RigMap",
     "SkeletonTree",
@@ -31,6 +37,7 @@ __all__ = [
     "name_kind",
     "parse_bvh",
     "read_bvh",
+    "read_c3d",
     "read_take",
     "resolve_humanoid",
     "rig_of",

@@ -13,3 +13,8 @@ class RigError(InputError):
 
 class TakeFileError(InputError):
     """A recorded take (.mcap) cannot be read: the message names the file and the problem."""
+
+
+class C3dError(InputError):
+    """A C3D marker file cannot be read, or its labels cannot give the 8 markers: the
+    message names the file and the problem."""
