@@ -14,7 +14,6 @@ set is a TOML file like a rig map:
 
 from __future__ import annotations
 
-import tomllib
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +22,7 @@ import numpy as np
 
 from samba.body import MARKER_NAMES
 from samba.ingest.errors import C3dError
+from samba.ingest.name_maps import read_name_map
 
 
 @dataclass(frozen=True)
@@ -58,37 +58,8 @@ class MarkerSet:
     @classmethod
     def from_toml(cls, path: str | Path) -> MarkerSet:
         """Read a marker-set file; `C3dError` naming the file and the problem."""
-        path = Path(path)
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            problem = f"cannot read marker-set file: {exc.strerror or exc}"
-            raise C3dError(str(path), problem) from exc
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise C3dError(str(path), f"not valid TOML: {exc}") from exc
-        table = doc.get("markers")
-        if not isinstance(table, dict):
-            raise C3dError(str(path), "needs a [markers] table mapping our 8 markers to labels")
-        unknown = sorted(set(table) - set(MARKER_NAMES))
-        absent = [m for m in MARKER_NAMES if m not in table]
-        if unknown or absent:
-            raise C3dError(
-                str(path),
-                f"[markers] must map exactly {', '.join(MARKER_NAMES)}"
-                + (f"; unknown {unknown}" if unknown else "")
-                + (f"; missing {absent}" if absent else ""),
-            )
-        labels = []
-        for marker in MARKER_NAMES:
-            value = table[marker]
-            options = [value] if isinstance(value, str) else value
-            if not (isinstance(options, list) and options and all(
-                isinstance(v, str) and v for v in options
-            )):
-                problem = f"marker {marker} must map to a label or a list of labels"
-                raise C3dError(str(path), problem)
-            labels.append(tuple(options))
-        return cls(name=str(doc.get("name", path.stem)), labels=tuple(labels))
+        name, labels = read_name_map(path, "markers", MARKER_NAMES, "label", C3dError)
+        return cls(name=name, labels=labels)
 
 
 PLUG_IN_GAIT = MarkerSet(

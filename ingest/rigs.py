@@ -17,7 +17,6 @@ that fails, or to override it, by a TOML file:
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +25,7 @@ import tomli_w
 
 from samba.body import JOINT_NAMES
 from samba.ingest.errors import RigError
+from samba.ingest.name_maps import read_name_map
 from samba.ingest.resolver import SkeletonTree, resolve_humanoid
 
 DETECTED = "detected"
@@ -65,35 +65,8 @@ class RigMap:
     @classmethod
     def from_toml(cls, path: str | Path) -> RigMap:
         """Read a user mapping file; raises `RigError` naming the file and the problem."""
-        path = Path(path)
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8"))
-        except OSError as exc:
-            raise RigError(str(path), f"cannot read mapping file: {exc.strerror or exc}") from exc
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise RigError(str(path), f"not valid TOML: {exc}") from exc
-        table = doc.get("joints")
-        if not isinstance(table, dict):
-            raise RigError(str(path), "needs a [joints] table mapping our 13 joints to names")
-        unknown = sorted(set(table) - set(JOINT_NAMES))
-        if unknown:
-            raise RigError(str(path), f"unknown joints {unknown}; ours are {list(JOINT_NAMES)}")
-        absent = [j for j in JOINT_NAMES if j not in table]
-        if absent:
-            raise RigError(str(path), f"[joints] does not map {', '.join(absent)}")
-        joints = []
-        for j in JOINT_NAMES:
-            value = table[j]
-            options = [value] if isinstance(value, str) else value
-            if not (
-                isinstance(options, list)
-                and options
-                and all(isinstance(v, str) and v for v in options)
-            ):
-                raise RigError(str(path), f"joint {j} must map to a name or a list of names")
-            joints.append(tuple(options))
-        name = doc.get("name", path.stem)
-        return cls(name=str(name), joints=tuple(joints))
+        name, joints = read_name_map(path, "joints", JOINT_NAMES, "name", RigError)
+        return cls(name=name, joints=joints)
 
 
 def _plain(name: str) -> str:

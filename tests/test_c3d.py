@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from samba.base.errors import SambaError
-from samba.body.skeleton import markers_of
+from samba.body.skeleton import MARKER_NAMES, markers_of
 from samba.ingest.c3d_take import read_c3d
 from samba.ingest.errors import C3dError
 from samba.ingest.marker_sets import MarkerSet
@@ -94,8 +94,12 @@ def test_a_marker_set_file_maps_other_labels(tmp_path: Path) -> None:
     [
         ("[markers\n", "not valid TOML"),
         ("name = 'x'\n", "needs a [markers] table"),
-        ("[markers]\nl_shoulder = 'A'\n", "missing ['r_shoulder'"),
-        ("[markers]\nl_shoulder = 3\n", "must map exactly"),
+        ("[markers]\nl_shoulder = 'A'\n", "[markers] does not map r_shoulder, l_wrist"),
+        ("[markers]\nl_hand = 'A'\n", "unknown markers ['l_hand']"),
+        (
+            "[markers]\n" + "".join(f"{m} = 3\n" for m in MARKER_NAMES),
+            "marker l_shoulder must map to a label or a list of labels",
+        ),
     ],
 )
 def test_bad_marker_set_files_are_named(tmp_path: Path, text: str, problem: str) -> None:
