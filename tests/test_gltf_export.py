@@ -4,8 +4,6 @@ follow the motion (within 1 mm) and the capture's bone directions (within 1°)."
 from __future__ import annotations
 
 import errno
-import importlib
-import importlib.util
 import json
 import os
 import shutil
@@ -28,6 +26,7 @@ from samba.export.errors import ExportError
 from samba.export.gltf_reader import read_glb_joint_positions
 from samba.export.gltf_writer import write_glb
 from samba.export.humanoid import N_BONES, HumanoidRig
+from samba.export.mannequin import mannequin
 from samba.export.motion import HumanoidMotion
 from samba.export.retargeting import bone_direction_errors, retarget
 from samba.synthetic import motions as synthetic
@@ -118,9 +117,6 @@ def test_skeleton_only_export_validates(tmp_path: Path, validate: Validate) -> N
 
 
 def test_mannequin_export_validates(tmp_path: Path, validate: Validate) -> None:
-    if importlib.util.find_spec("samba.export.mannequin") is None:
-        pytest.skip("samba.export.mannequin is not there yet")
-    mannequin = importlib.import_module("samba.export.mannequin").mannequin
     _, motion = synthetic_motion("wave")
     path = tmp_path / "wave.glb"
     write_glb(path, motion, mannequin(motion.rig))
