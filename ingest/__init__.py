@@ -1,5 +1,7 @@
 """Importers: BVH of any rig and recorded MCAP takes to 13-joint takes in meters, +Y up
-(rig mapping, unit and up-axis detection, resampling), and batch import into a pose store.
+(rig mapping, unit and up-axis detection, resampling), and batch import into a pose store;
+C3D marker takes with their marker sets, and the reference joint centres of a full marker
+set by published rules.
 """
 
 from samba.ingest.batch import FileResult, expand_paths, import_paths
@@ -7,6 +9,7 @@ from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.c3d_take import MarkerTake, read_c3d
 from samba.ingest.errors import BvhError, C3dError, RigError
+from samba.ingest.joint_centres import JointWidths, reference_joints
 from samba.ingest.marker_sets import PLUG_IN_GAIT, MarkerSet
 from samba.ingest.mcap_take import POSE_TOPIC, TAKE_METADATA, read_take
 from samba.ingest.resolver import HumanoidMap, SkeletonTree, name_kind, resolve_humanoid
@@ -25,6 +28,7 @@ __all__ = [
     "C3dError",
     "FileResult",
     "HumanoidMap",
+    "JointWidths",
     "MarkerSet",
     "MarkerTake",
     "RigError",
@@ -39,6 +43,7 @@ __all__ = [
     "read_bvh",
     "read_c3d",
     "read_take",
+    "reference_joints",
     "resolve_humanoid",
     "rig_of",
 ]
