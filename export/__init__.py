@@ -10,11 +10,12 @@ from samba.export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
 from samba.export.live_retarget import LiveRetarget, retarget_together
 from samba.export.mannequin import mannequin
 from samba.export.motion import HumanoidMotion
-from samba.export.outputs import Avatar, load_avatar, write_export
+from samba.export.outputs import FORMAT_SUFFIXES, Avatar, format_of, load_avatar, write_export
 from samba.export.retargeting import retarget
 
 __all__ = [
     "BONE_NAMES",
+    "FORMAT_SUFFIXES",
     "N_BONES",
     "UNITS",
     "Avatar",
@@ -23,6 +24,7 @@ __all__ = [
     "HumanoidRig",
     "LiveRetarget",
     "avatar_humanoid",
+    "format_of",
     "load_avatar",
     "mannequin",
     "read_avatar_rig",

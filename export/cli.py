@@ -121,5 +121,3 @@ def parse_range(text: str | None) -> slice:
     if (start is not None and start < 0) or (stop is not None and stop < 0):
         raise ExportError("--range", f"frame numbers must be >= 0, got {text!r}")
     return slice(start, stop)
-
-

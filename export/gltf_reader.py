@@ -30,9 +30,7 @@ _MAGIC = b"glTF"
 _JSON_CHUNK = 0x4E4F534A
 _BIN_CHUNK = 0x004E4942
 _UTF8_BOM = b"\xef\xbb\xbf"
-_AVATAR_FORMATS = (
-    "avatars are read from .glb, .vrm, .gltf, .usd, .usda, .usdc or .usdz files"
-)
+_AVATAR_FORMATS = "avatars are read from .glb, .vrm, .gltf, .usd, .usda, .usdc or .usdz files"
 _COMPONENTS: dict[int, type[np.generic]] = {
     5120: np.int8,
     5121: np.uint8,

@@ -1,7 +1,7 @@
 """Importers: BVH of any rig and recorded MCAP takes to 13-joint takes in meters, +Y up
 (rig mapping, unit and up-axis detection, resampling), and batch import into a pose store;
-C3D marker takes with their marker sets, and the reference joint centres of a full marker
-set by published rules.
+marker takes (C3D files, recorded takes' markers) with their marker sets, and the reference
+joint centres of a full marker set by published rules.
 """
 
 from samba.ingest.batch import FileResult, expand_paths, import_paths
@@ -11,7 +11,9 @@ from samba.ingest.c3d_take import MarkerTake, read_c3d
 from samba.ingest.errors import BvhError, C3dError, RigError
 from samba.ingest.joint_centres import JointWidths, reference_joints
 from samba.ingest.marker_sets import PLUG_IN_GAIT, MarkerSet
-from samba.ingest.mcap_take import POSE_TOPIC, TAKE_METADATA, read_take
+from samba.ingest.marker_takes import read_marker_take, read_recorded_markers
+from samba.ingest.mcap_take import POSE_TOPIC, SUBJECT_METADATA, TAKE_METADATA, read_take
+from samba.ingest.normalize import floor_height
 from samba.ingest.resolver import HumanoidMap, SkeletonTree, name_kind, resolve_humanoid
 from samba.ingest.rigs import BUILTIN_RIGS, DETECTED, RigMap, detect_rig, rig_of
 
@@ -20,6 +22,7 @@ __all__ = [
     "DETECTED",
     "PLUG_IN_GAIT",
     "POSE_TOPIC",
+    "SUBJECT_METADATA",
     "TAKE_METADATA",
     "BvhError",
     "BvhFile",
@@ -36,12 +39,15 @@ __all__ = [
     "SkeletonTree",
     "detect_rig",
     "expand_paths",
+    "floor_height",
     "import_paths",
     "load_bvh_take",
     "name_kind",
     "parse_bvh",
     "read_bvh",
     "read_c3d",
+    "read_marker_take",
+    "read_recorded_markers",
     "read_take",
     "reference_joints",
     "resolve_humanoid",

@@ -16,11 +16,12 @@ a shared take. Any of them becomes a `C3dError` naming the file.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from samba.body import resample_times, sample_linear
 from samba.ingest.errors import C3dError
 from samba.ingest.marker_sets import PLUG_IN_GAIT, MarkerSet
 
@@ -51,6 +52,18 @@ class MarkerTake:
     def point(self, label: str) -> np.ndarray:
         """The trajectory (n, 3) of the point `label`; `KeyError` if the take has none."""
         return self.points[:, self.labels.index(label)]
+
+    def resampled(self, fps: float) -> MarkerTake:
+        """The take at `fps` frames per second: points and markers linearly interpolated
+        in time (a point missing on either side of a new frame stays missing); an integer
+        rate ratio (120 to 30) picks frames."""
+        times = resample_times(len(self), self.fps, fps)
+        return replace(
+            self,
+            points=sample_linear(self.points, times),
+            markers=sample_linear(self.markers, times),
+            fps=float(fps),
+        )
 
 
 def read_c3d(path: str | Path, marker_set: MarkerSet = PLUG_IN_GAIT) -> MarkerTake:

@@ -49,7 +49,7 @@ class MarkerSet:
                 source,
                 f"marker set {self.name!r} finds no label for {'; '.join(lacking)}; the file "
                 f"has {', '.join(labels[:12])}{', ...' if len(labels) > 12 else ''}: write a "
-                "marker-set TOML file ([markers] l_shoulder = \"LABEL\", ...)",
+                'marker-set TOML file ([markers] l_shoulder = "LABEL", ...)',
             )
         with warnings.catch_warnings():  # a frame where all of a marker's labels are missing
             warnings.simplefilter("ignore", RuntimeWarning)  # gives NaN, as it should

@@ -24,6 +24,8 @@ POSE_TOPIC = "/pose_raw"
 """Topic of the reconstructed poses (`samba.PoseRaw` JSON: `joints` 13 x [x, y, z] meters)."""
 TAKE_METADATA = "take"
 """Name of the metadata record holding `name`, `fps` and `start_time` (ISO 8601, UTC)."""
+SUBJECT_METADATA = "subject"
+"""Name of the metadata record holding the subject's `skin_offsets` (JSON), if any."""
 GAP_PERIODS = 1.5
 """A step between recorded frames longer than this many frame periods is a gap of
 dropped frames."""
@@ -44,8 +46,10 @@ def read_take(path: str | Path) -> Take:
     counts the frames recorded.
 
     A file cut short (no footer) gives the frames before the cut, with a warning in
-    `Take.warnings` saying so and how many frames were recovered. Raises `TakeFileError`
-    naming the file when it cannot be read, is not MCAP, or holds no recorded frame.
+    `Take.warnings` saying so and how many frames were recovered. The subject's skin
+    offsets, when the take has them, are in `Take.meta["skin_offsets"]` (JSON). Raises
+    `TakeFileError` naming the file when it cannot be read, is not MCAP, or holds no
+    recorded frame.
     """
     path = Path(path)
     source = str(path)
@@ -54,14 +58,17 @@ def read_take(path: str | Path) -> Take:
     except OSError as exc:
         raise TakeFileError(source, f"cannot read file: {exc.strerror or exc}") from exc
     meta: dict[str, str] | None = None
+    subject: dict[str, str] = {}
     pose_channels: set[int] = set()
     poses: list[np.ndarray] = []
     times: list[int] = []
     with stream:
-        records = _RecordStream(stream, path.stat().st_size)
+        records = RecordStream(stream, path.stat().st_size)
         for record in records:
             if isinstance(record, Metadata) and record.name == TAKE_METADATA:
                 meta = dict(record.metadata)
+            elif isinstance(record, Metadata) and record.name == SUBJECT_METADATA:
+                subject = dict(record.metadata)
             elif isinstance(record, Channel) and record.topic == POSE_TOPIC:
                 pose_channels.add(record.id)
             elif isinstance(record, Message) and record.channel_id in pose_channels:
@@ -104,14 +111,15 @@ def read_take(path: str | Path) -> Take:
         source=str(path.resolve()),
         rig="live",
         warnings=warnings,
-        meta={"start_time": meta.get("start_time", ""), "format": "mcap"},
+        meta={"start_time": meta.get("start_time", ""), "format": "mcap", **subject},
     )
 
 
 def on_the_clock(poses: np.ndarray, times_ns: np.ndarray, fps: float) -> tuple[np.ndarray, str]:
-    """Poses (n, 13, 3) captured at `times_ns` (n,) integer nanoseconds, on a regular grid
-    at `fps` frames per second from the first capture to the last, and what was done in
-    words ("" when the frames were already regular: returned unchanged).
+    """Poses (n, 13, 3) (or any frames (n, k, 3), such as markers) captured at `times_ns`
+    (n,) integer nanoseconds, on a regular grid at `fps` frames per second from the first
+    capture to the last, and what was done in words ("" when the frames were already
+    regular: returned unchanged).
 
     Frames out of order are sorted and frames of one capture time kept once. A gap
     (a step over `GAP_PERIODS` periods) up to `MAX_INTERPOLATED_GAP_S` long is bridged by
@@ -153,7 +161,7 @@ def _ends_whole(path: Path) -> bool:
         return stream.read() == MCAP0_MAGIC
 
 
-class _RecordStream:
+class RecordStream:
     """Iterates the records of an MCAP file of `size` bytes until its end or the first
     undecodable byte. Afterwards `count` is the number of records read and `error`
     describes what stopped the stream early (None after a complete file)."""

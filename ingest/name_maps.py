@@ -49,9 +49,9 @@ def read_name_map(
     for key in ours:
         entry = entries[key]
         options = [entry] if isinstance(entry, str) else entry
-        if not (isinstance(options, list) and options and all(
-            isinstance(v, str) and v for v in options
-        )):
+        if not (
+            isinstance(options, list) and options and all(isinstance(v, str) and v for v in options)
+        ):
             raise error(str(path), f"{thing} {key} must map to a {value} or a list of {value}s")
         names.append(tuple(options))
     return str(doc.get("name", path.stem)), tuple(names)

@@ -34,8 +34,10 @@ import numpy as np
 from samba.ingest.errors import RigError
 
 SIDES = ("Left", "Right")
-LIMB_BONES = {"arm": ("Shoulder", "UpperArm", "LowerArm", "Hand"),
-              "leg": ("LegRoot", "UpperLeg", "LowerLeg", "Foot")}
+LIMB_BONES = {
+    "arm": ("Shoulder", "UpperArm", "LowerArm", "Hand"),
+    "leg": ("LegRoot", "UpperLeg", "LowerLeg", "Foot"),
+}
 """A limb's bones from the trunk to its end (`Shoulder` is the clavicle, `LegRoot` a
 bone from the pelvis to the hip joint, as CMU's `LHipJoint`; both optional)."""
 CAPTURE_BONES: tuple[str, ...] = (
@@ -63,8 +65,21 @@ _LEFT, _RIGHT = {"l", "left", "lft"}, {"r", "right", "rt"}
 _KINDS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("end", ("end", "nub", "top", "site", "tip")),
     ("twist", ("twist", "roll", "share", "helper", "corrective")),
-    ("finger", ("thumb", "index", "middle", "mid", "ring", "pinky", "little", "finger",
-                "carpal", "metacarpal")),
+    (
+        "finger",
+        (
+            "thumb",
+            "index",
+            "middle",
+            "mid",
+            "ring",
+            "pinky",
+            "little",
+            "finger",
+            "carpal",
+            "metacarpal",
+        ),
+    ),
     ("toe", ("toe", "toes", "toebase", "ball")),
     ("hand", ("hand", "wrist", "palm")),
     ("lowerarm", ("forearm", "lowerarm", "lowarm", "elbow", "radius", "ulna")),
@@ -76,18 +91,43 @@ _KINDS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("upperleg", ("upperleg", "upleg", "thigh", "femur")),
     ("legroot", ("hipjoint", "buttock")),
     ("hips", ("hips", "pelvis", "hip")),
-    ("spine", ("spine", "abdomen", "waist", "lowerback", "torso", "back", "chest",
-               "upperchest", "upperback")),
+    (
+        "spine",
+        (
+            "spine",
+            "abdomen",
+            "waist",
+            "lowerback",
+            "torso",
+            "back",
+            "chest",
+            "upperchest",
+            "upperback",
+        ),
+    ),
     ("neck", ("neck", "lowerneck", "upperneck")),
     ("head", ("head",)),
 )
 """Bone kinds and the words that name them, tried in order on a name's joined tokens
 (`hip` with a side is an upper leg, without one the pelvis)."""
 _KIND_WORDS = {
-    "end": "end of a chain", "twist": "twist bone", "finger": "fingers", "toe": "toes",
-    "hand": "hand", "lowerarm": "lower arm", "upperarm": "upper arm", "shoulder": "shoulder",
-    "clavicle": "clavicle", "foot": "foot", "lowerleg": "lower leg", "upperleg": "upper leg",
-    "legroot": "hip bone", "hips": "hips", "spine": "spine", "neck": "neck", "head": "head",
+    "end": "end of a chain",
+    "twist": "twist bone",
+    "finger": "fingers",
+    "toe": "toes",
+    "hand": "hand",
+    "lowerarm": "lower arm",
+    "upperarm": "upper arm",
+    "shoulder": "shoulder",
+    "clavicle": "clavicle",
+    "foot": "foot",
+    "lowerleg": "lower leg",
+    "upperleg": "upper leg",
+    "legroot": "hip bone",
+    "hips": "hips",
+    "spine": "spine",
+    "neck": "neck",
+    "head": "head",
 }
 """Each bone kind in words, for errors."""
 _GENERIC = {"bone", "bn", "jnt", "joint", "bend", "def"}
@@ -310,8 +350,12 @@ class _Resolution:
         hands = [t for t in upper_body if t != head]
         left_hand, right_hand = self._sides(hands, feet, axis)
         left_foot, right_foot = self._sides(feet, feet, axis)
-        return {"LeftHand": left_hand, "RightHand": right_hand, "LeftFoot": left_foot,
-                "RightFoot": right_foot}
+        return {
+            "LeftHand": left_hand,
+            "RightHand": right_hand,
+            "LeftFoot": left_foot,
+            "RightFoot": right_foot,
+        }
 
     def _sides(self, pair: list[int], feet: list[int], up: np.ndarray) -> tuple[int, int]:
         """(left, right) of two limb ends: by the names along their chains, else by the
@@ -325,10 +369,13 @@ class _Resolution:
             return (pair[0], pair[1]) if first_left else (pair[1], pair[0])
         toes = [c for f in feet for c in self.children[f]]
         if not toes:
-            raise self.fail("left and right cannot be told apart: no side in the names and "
-                            "no toes to show which way the feet point")
-        forward = np.mean([self.positions[c] - self.positions[self.tree.parents[c]]
-                           for c in toes], axis=0)
+            raise self.fail(
+                "left and right cannot be told apart: no side in the names and "
+                "no toes to show which way the feet point"
+            )
+        forward = np.mean(
+            [self.positions[c] - self.positions[self.tree.parents[c]] for c in toes], axis=0
+        )
         left_axis = np.cross(up, forward)
         a, b = pair
         top = self._common_ancestor(a, b)  # compare where the limbs leave the trunk: in a
@@ -479,7 +526,8 @@ class _Resolution:
         """Children of `j` whose branch reaches `LONG_BRANCH` of the skeleton's size."""
         threshold = LONG_BRANCH * self.size
         return [
-            c for c in self.children[j]
+            c
+            for c in self.children[j]
             if reach[c] + np.linalg.norm(self.positions[c] - self.positions[j]) >= threshold
         ]
 

@@ -58,8 +58,10 @@ class RigMap:
 
     def toml(self) -> str:
         """The map as the TOML mapping file `from_toml` reads (and `--map` takes)."""
-        joints = {ours: names[0] if len(names) == 1 else list(names)
-                  for ours, names in zip(JOINT_NAMES, self.joints, strict=True)}
+        joints = {
+            ours: names[0] if len(names) == 1 else list(names)
+            for ours, names in zip(JOINT_NAMES, self.joints, strict=True)
+        }
         return tomli_w.dumps({"name": self.name, "joints": joints})
 
     @classmethod

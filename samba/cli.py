@@ -22,7 +22,14 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from samba.base import InputError, SambaError, natural, positive, write_text_atomic
+from samba.base import (
+    InputError,
+    SambaError,
+    natural,
+    positive,
+    seconds_range,
+    write_text_atomic,
+)
 from samba.cameras import (
     BOARD_SPEC_HELP,
     WORLDS,
@@ -32,20 +39,35 @@ from samba.cameras import (
 )
 from samba.db import PoseIndex
 from samba.db import cli as store_cli
-from samba.evaluation import document, evaluate, report_text, sweep_points, write_plots
+from samba.evaluation import (
+    EVALUATION_FPS,
+    MarkerTest,
+    document,
+    evaluate,
+    evaluate_markers,
+    marker_document,
+    marker_report,
+    report_text,
+    sweep_points,
+    write_plots,
+)
 from samba.export import avatar_humanoid
 from samba.export import cli as export_cli
-from samba.ingest import cli as import_cli
 from samba.ingest import (
+    PLUG_IN_GAIT,
+    MarkerSet,
     detect_rig,
     expand_paths,
     load_bvh_take,
     read_bvh,
+    read_c3d,
+    reference_joints,
     resolve_humanoid,
     rig_of,
 )
+from samba.ingest import cli as import_cli
 from samba.reconstruct import METHODS, method
-from samba.service.cli import capture_volume, demo, node, serve, track_video
+from samba.service.cli import capture_volume, demo, node, reconstruct, serve, track_video
 
 
 def _register_db(parser: argparse.ArgumentParser) -> None:
@@ -92,7 +114,8 @@ def _rig(args: argparse.Namespace) -> int:
 
 
 def _register_eval(parser: argparse.ArgumentParser) -> None:
-    """`samba eval`: the accuracy protocol over BVH files (`samba.evaluation`)."""
+    """`samba eval`: the accuracy protocol over BVH files and real marker takes (C3D)
+    (`samba.evaluation`)."""
     parser.add_argument(
         "--train", nargs="+", required=True, metavar="PATH", help="BVH files and/or folders"
     )
@@ -101,8 +124,9 @@ def _register_eval(parser: argparse.ArgumentParser) -> None:
         nargs="+",
         required=True,
         metavar="PATH",
-        help="BVH files and/or folders; a test take also given in --train is left out of "
-        "its own database (so --train D --test D is leave-one-take-out over D)",
+        help="BVH and/or C3D files and folders; a BVH test take also given in --train is "
+        "left out of its own database (so --train D --test D is leave-one-take-out over "
+        "D); a C3D take is scored against reference joint centres from its full marker set",
     )
     parser.add_argument(
         "--methods",
@@ -149,6 +173,25 @@ def _register_eval(parser: argparse.ArgumentParser) -> None:
         metavar="F",
         help="evaluate only the first F frames of each test take",
     )
+    real = parser.add_argument_group("real marker takes (C3D)")
+    real.add_argument(
+        "--markers-3d",
+        action="store_true",
+        help="reconstruct the recorded 3D markers as they are (default: through the "
+        "evaluation cameras, projected, noised and triangulated)",
+    )
+    real.add_argument(
+        "--calibration",
+        type=seconds_range,
+        default=(0.0, 2.0),
+        metavar="A:B",
+        help="seconds of each take the subject's skin offsets are calibrated on (default 0:2)",
+    )
+    real.add_argument(
+        "--marker-set",
+        metavar="FILE.toml",
+        help="which labels are the 8 markers (default: Plug-in-Gait names, LSHO, LWRA ...)",
+    )
     parser.set_defaults(run=_eval)
 
 
@@ -186,6 +229,33 @@ def _bvh_files(paths: Sequence[str], flag: str) -> list[Path]:
     return files
 
 
+def _test_files(paths: Sequence[str]) -> tuple[list[Path], list[Path]]:
+    """The BVH and the C3D files under the --test paths (folders searched)."""
+    named = [Path(p) for p in paths]
+    c3d = [p for p in named if p.suffix.lower() == ".c3d"]
+    c3d += [
+        f for p in named if p.is_dir() for f in sorted(p.rglob("*")) if f.suffix.lower() == ".c3d"
+    ]
+    rest = [str(p) for p in named if p.suffix.lower() != ".c3d"]
+    found = [p.resolve() for p in expand_paths(rest)] if rest else []
+    if not found and not c3d:
+        raise InputError(f"--test {' '.join(paths)}", "no .bvh or .c3d files found")
+    return list(dict.fromkeys(found)), list(dict.fromkeys(p.resolve() for p in c3d))
+
+
+def _marker_tests(
+    files: Sequence[Path], marker_set: str | None, max_frames: int | None
+) -> list[MarkerTest]:
+    """Real marker takes at 30 fps with their reference joint centres."""
+    chosen = MarkerSet.from_toml(marker_set) if marker_set else PLUG_IN_GAIT
+    tests = []
+    for path in files:
+        take = read_c3d(path, chosen).resampled(EVALUATION_FPS)
+        truth = reference_joints(take)
+        tests.append(MarkerTest(take.name, truth[:max_frames], take.markers[:max_frames]))
+    return tests
+
+
 def _eval(args: argparse.Namespace) -> int:
     if args.plots:
         if Path(args.plots).exists() and not Path(args.plots).is_dir():
@@ -194,7 +264,8 @@ def _eval(args: argparse.Namespace) -> int:
     if args.json and not Path(args.json).resolve().parent.is_dir():
         raise InputError("--json", f"folder of {args.json} does not exist")
     train = _bvh_files(args.train, "--train")
-    test = _bvh_files(args.test, "--test")
+    test, c3d = _test_files(args.test)
+    real = _marker_tests(c3d, args.marker_set, args.max_frames)
     files = list(dict.fromkeys(train + test))
     stems = [f.stem for f in files]  # a take is named by its file stem, or its path if not unique
     takes = {
@@ -203,24 +274,40 @@ def _eval(args: argparse.Namespace) -> int:
     train_takes = [takes[f] for f in train]
     test_takes = [(name, poses[: args.max_frames]) for name, poses in (takes[f] for f in test)]
     runs = {name: method(name).with_sizes(args.K, args.N) for name in args.methods}
-    sweeps = sweep_points(runs, args.sweep_k, args.sweep_n, args.N)
+    sweeps = sweep_points(runs, args.sweep_k, args.sweep_n, args.N) if test_takes else {}
+    doc: dict[str, object] = {}
     with threadpool_limits(limits=1):  # the protocol times single-threaded reconstruction
-        evaluation = evaluate(
-            train_takes,
-            test_takes,
-            runs,
-            PoseIndex.build,
-            args.seed,
-            args.dropout,
-            args.new_user,
-            progress=None,
-        )
-    print(report_text(evaluation, args.methods, sweeps))
+        if test_takes:
+            evaluation = evaluate(
+                train_takes,
+                test_takes,
+                runs,
+                PoseIndex.build,
+                args.seed,
+                args.dropout,
+                args.new_user,
+                progress=None,
+            )
+            print(report_text(evaluation, args.methods, sweeps))
+            doc = document(evaluation, runs, args.methods, sweeps, args.max_frames)
+        if real:
+            start, stop = (round(t * EVALUATION_FPS) for t in args.calibration)
+            marked = evaluate_markers(
+                train_takes,
+                real,
+                {name: runs[name] for name in args.methods},
+                PoseIndex.build,
+                args.seed,
+                (start, stop),
+                args.markers_3d,
+                progress=None,
+            )
+            print(("\n" if test_takes else "") + marker_report(marked))
+            doc["real_markers"] = marker_document(marked)
     if args.json:
-        doc = document(evaluation, runs, args.methods, sweeps, args.max_frames)
         write_text_atomic(args.json, json.dumps(doc, indent=1) + "\n")
         print(f"wrote {args.json}")
-    if args.plots:
+    if args.plots and test_takes:
         written = write_plots(Path(args.plots), evaluation, args.methods, sweeps)
         print(f"wrote {len(written)} plots to {args.plots}")
     return 0
@@ -294,8 +381,15 @@ AREAS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], str]] = {
         _register_db,
         "pose database: init, import, ls, show, label, rm, verify, stats, tree, query, rig",
     ),
-    "eval": (_register_eval, "accuracy and speed of every reconstruction method on BVH takes"),
+    "eval": (
+        _register_eval,
+        "accuracy and speed of every reconstruction method on BVH and real marker (C3D) takes",
+    ),
     "calibrate": (_register_calibrate, "calibrate cameras from images or videos of a board"),
+    "reconstruct": (
+        reconstruct.register,
+        "reconstruct a marker take (C3D, or recorded by samba serve) into a 13-joint take",
+    ),
     "export": (
         export_cli.register,
         "retarget takes to a humanoid avatar and write USD, glTF or BVH",

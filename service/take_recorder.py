@@ -33,11 +33,11 @@ import numpy as np
 from mcap.writer import Writer
 
 from samba.body import BONES, JOINT_NAMES, N_JOINTS, N_MARKERS, TORSO_EDGES
-from samba.ingest import POSE_TOPIC, TAKE_METADATA
+from samba.ingest import POSE_TOPIC, SUBJECT_METADATA, TAKE_METADATA
 from samba.service.errors import ServiceError
 
 if TYPE_CHECKING:
-    from samba.reconstruct import PoseEstimate
+    from samba.reconstruct import PoseEstimate, SkinOffsets
 
 
 FRAME_ID = "mocap"
@@ -219,6 +219,13 @@ class TakeRecorder:
         self.frames_written += 1
         if time.monotonic() - self._last_flush >= self._flush_interval_s:
             self.flush()
+
+    def write_subject(self, offsets: SkinOffsets) -> None:
+        """Record the subject's skin offsets (`SkinOffsets.as_dict`, JSON) as the take's
+        `subject` metadata, which `samba.ingest.read_take` gives back in
+        `Take.meta["skin_offsets"]`."""
+        document = json.dumps(offsets.as_dict(), separators=(",", ":"))
+        self._writer.add_metadata(SUBJECT_METADATA, {"skin_offsets": document})
 
     def flush(self) -> None:
         """Write the open chunk and hand everything to the operating system (no fsync):

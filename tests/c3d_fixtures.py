@@ -11,8 +11,20 @@ import numpy as np
 
 from samba.synthetic.motions import generate
 
-LABELS = ("LSHO", "RSHO", "LWRA", "LWRB", "RWRA", "RWRB", "LKNE", "RKNE", "LANK", "RANK",
-          "C7", "CLAV")
+LABELS = (
+    "LSHO",
+    "RSHO",
+    "LWRA",
+    "LWRB",
+    "RWRA",
+    "RWRB",
+    "LKNE",
+    "RKNE",
+    "LANK",
+    "RANK",
+    "C7",
+    "CLAV",
+)
 """Plug-in-Gait labels the fixture writes (the wrists' two markers each side of the joint)."""
 WRIST_HALF_WIDTH = 0.025
 """Half the distance between a wrist's two markers, meters."""

@@ -48,6 +48,17 @@ def cmu_files(cmu_dir: Path) -> list[Path]:
 
 
 @pytest.fixture(scope="session")
+def c3d_dir() -> Path:
+    """The folder of the real C3D marker takes; skips the test when it is absent."""
+    data = shared_data_dir()
+    if data is None or not (data / "c3d" / "85_02.c3d").is_file():
+        pytest.skip(
+            "real C3D data not found: set SAMBA_DATA or put ../shared/data/c3d beside the project"
+        )
+    return data / "c3d"
+
+
+@pytest.fixture(scope="session")
 def live_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A pose store of the built-in synthetic motions (the live service tests' database)."""
     path = tmp_path_factory.mktemp("serve") / "db"

@@ -13,27 +13,148 @@ from scipy.spatial.transform import Rotation
 from samba.ingest.bvh import BvhFile
 from samba.ingest.resolver import resolve_humanoid
 
-ROLES = ("Hips", "Spine", "Chest", "Neck", "Head", "Shoulder", "UpperArm", "LowerArm", "Hand",
-         "LegRoot", "UpperLeg", "LowerLeg", "Foot")
+ROLES = (
+    "Hips",
+    "Spine",
+    "Chest",
+    "Neck",
+    "Head",
+    "Shoulder",
+    "UpperArm",
+    "LowerArm",
+    "Hand",
+    "LegRoot",
+    "UpperLeg",
+    "LowerLeg",
+    "Foot",
+)
 CONVENTIONS: dict[str, dict[str, str]] = {
-    "blender": dict(zip(ROLES, ("pelvis", "spine", "spine.001", "neck", "head", "shoulder.{L}",
-                                "upper_arm.{L}", "forearm.{L}", "hand.{L}", "pelvis.{L}",
-                                "thigh.{L}", "shin.{L}", "foot.{L}"), strict=True)),
-    "maya": dict(zip(ROLES, ("Root_M", "Spine1_M", "Chest_M", "Neck_M", "Head_M", "{L}_Clavicle",
-                             "{L}_UpperArm", "{L}_ForeArm", "{L}_Hand", "{L}_HipJoint",
-                             "{L}_Thigh", "{L}_Knee", "{L}_Ankle"), strict=True)),
-    "unreal": dict(zip(ROLES, ("pelvis", "spine_01", "spine_02", "neck_01", "head",
-                               "clavicle_{l}", "upperarm_{l}", "lowerarm_{l}", "hand_{l}",
-                               "hipjoint_{l}", "thigh_{l}", "calf_{l}", "foot_{l}"), strict=True)),
-    "unity": dict(zip(ROLES, ("Hips", "Spine", "Chest", "Neck", "Head", "{Left}Shoulder",
-                              "{Left}UpperArm", "{Left}LowerArm", "{Left}Hand", "{Left}HipJoint",
-                              "{Left}UpperLeg", "{Left}LowerLeg", "{Left}Foot"), strict=True)),
-    "lower case": dict(zip(ROLES, ("hips", "spine", "spine1", "neck", "head", "{left}shoulder",
-                                   "{left}arm", "{left}forearm", "{left}hand", "{left}hipjoint",
-                                   "{left}upleg", "{left}leg", "{left}foot"), strict=True)),
-    "game studio": dict(zip(ROLES, ("Hips", "Spine", "Chest", "Neck", "Head", "Shoulder_{L}",
-                                    "UpperArm_{L}", "LowerArm_{L}", "Hand_{L}", "HipJoint_{L}",
-                                    "UpperLeg_{L}", "LowerLeg_{L}", "Foot_{L}"), strict=True)),
+    "blender": dict(
+        zip(
+            ROLES,
+            (
+                "pelvis",
+                "spine",
+                "spine.001",
+                "neck",
+                "head",
+                "shoulder.{L}",
+                "upper_arm.{L}",
+                "forearm.{L}",
+                "hand.{L}",
+                "pelvis.{L}",
+                "thigh.{L}",
+                "shin.{L}",
+                "foot.{L}",
+            ),
+            strict=True,
+        )
+    ),
+    "maya": dict(
+        zip(
+            ROLES,
+            (
+                "Root_M",
+                "Spine1_M",
+                "Chest_M",
+                "Neck_M",
+                "Head_M",
+                "{L}_Clavicle",
+                "{L}_UpperArm",
+                "{L}_ForeArm",
+                "{L}_Hand",
+                "{L}_HipJoint",
+                "{L}_Thigh",
+                "{L}_Knee",
+                "{L}_Ankle",
+            ),
+            strict=True,
+        )
+    ),
+    "unreal": dict(
+        zip(
+            ROLES,
+            (
+                "pelvis",
+                "spine_01",
+                "spine_02",
+                "neck_01",
+                "head",
+                "clavicle_{l}",
+                "upperarm_{l}",
+                "lowerarm_{l}",
+                "hand_{l}",
+                "hipjoint_{l}",
+                "thigh_{l}",
+                "calf_{l}",
+                "foot_{l}",
+            ),
+            strict=True,
+        )
+    ),
+    "unity": dict(
+        zip(
+            ROLES,
+            (
+                "Hips",
+                "Spine",
+                "Chest",
+                "Neck",
+                "Head",
+                "{Left}Shoulder",
+                "{Left}UpperArm",
+                "{Left}LowerArm",
+                "{Left}Hand",
+                "{Left}HipJoint",
+                "{Left}UpperLeg",
+                "{Left}LowerLeg",
+                "{Left}Foot",
+            ),
+            strict=True,
+        )
+    ),
+    "lower case": dict(
+        zip(
+            ROLES,
+            (
+                "hips",
+                "spine",
+                "spine1",
+                "neck",
+                "head",
+                "{left}shoulder",
+                "{left}arm",
+                "{left}forearm",
+                "{left}hand",
+                "{left}hipjoint",
+                "{left}upleg",
+                "{left}leg",
+                "{left}foot",
+            ),
+            strict=True,
+        )
+    ),
+    "game studio": dict(
+        zip(
+            ROLES,
+            (
+                "Hips",
+                "Spine",
+                "Chest",
+                "Neck",
+                "Head",
+                "Shoulder_{L}",
+                "UpperArm_{L}",
+                "LowerArm_{L}",
+                "Hand_{L}",
+                "HipJoint_{L}",
+                "UpperLeg_{L}",
+                "LowerLeg_{L}",
+                "Foot_{L}",
+            ),
+            strict=True,
+        )
+    ),
 }
 """Joint names per convention, `{L}` / `{l}` / `{Left}` / `{left}` standing for the side."""
 STRUCTURES = ("twist and roll bones", "position channels", "bones along X", "dummy root")
@@ -56,9 +177,14 @@ def variant(
     """BVH text of the first `frames` frames of `bvh` renamed after `convention` (a key of
     `CONVENTIONS`, or "original") with the changes `structures` (of `STRUCTURES`)."""
     nodes = [
-        _Node(j.name, j.parent, np.array(j.offset, dtype=np.float64), list(j.channels),
-              bvh.motion[:frames, j.first_channel : j.first_channel + len(j.channels)].copy(),
-              j.end_site)
+        _Node(
+            j.name,
+            j.parent,
+            np.array(j.offset, dtype=np.float64),
+            list(j.channels),
+            bvh.motion[:frames, j.first_channel : j.first_channel + len(j.channels)].copy(),
+            j.end_site,
+        )
         for j in bvh.joints
     ]
     bones = resolve_humanoid(bvh.skeleton(), bvh.source).bones
@@ -75,8 +201,14 @@ def variant(
     if "bones along X" in structures:
         _along_x(nodes)
     if "dummy root" in structures:
-        root = _Node("joint_Root", -1, np.zeros(3), ["Xposition", "Yposition", "Zposition",
-                     "Zrotation", "Xrotation", "Yrotation"], np.zeros((frames, 6)), False)
+        root = _Node(
+            "joint_Root",
+            -1,
+            np.zeros(3),
+            ["Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"],
+            np.zeros((frames, 6)),
+            False,
+        )
         nodes.insert(0, root)
         for node in nodes[1:]:
             node.parent += 1
@@ -100,18 +232,36 @@ def _twists(nodes: list[_Node], bones: dict[str, int]) -> None:
     for side in ("Left", "Right"):
         upper, lower = bones[side + "UpperArm"], bones[side + "LowerArm"]
         shin = bones[side + "LowerLeg"]
-        twist = _Node(nodes[upper].name + "_twist", upper, nodes[lower].offset / 2,
-                      ["Zrotation", "Xrotation", "Yrotation"], np.zeros((len(nodes[0].values), 3)),
-                      False)
+        twist = _Node(
+            nodes[upper].name + "_twist",
+            upper,
+            nodes[lower].offset / 2,
+            ["Zrotation", "Xrotation", "Yrotation"],
+            np.zeros((len(nodes[0].values), 3)),
+            False,
+        )
         nodes.append(twist)
         nodes[lower].parent = len(nodes) - 1
         nodes[lower].offset = nodes[lower].offset / 2
-        roll = _Node(nodes[shin].name + "_roll", shin, np.array([0.0, -1.0, 0.0]),
-                     ["Zrotation", "Xrotation", "Yrotation"], np.zeros((len(nodes[0].values), 3)),
-                     False)
+        roll = _Node(
+            nodes[shin].name + "_roll",
+            shin,
+            np.array([0.0, -1.0, 0.0]),
+            ["Zrotation", "Xrotation", "Yrotation"],
+            np.zeros((len(nodes[0].values), 3)),
+            False,
+        )
         nodes.append(roll)
-        nodes.append(_Node(roll.name + "_end", len(nodes) - 1, np.array([0.0, -1.0, 0.0]), [],
-                           np.zeros((len(nodes[0].values), 0)), True))
+        nodes.append(
+            _Node(
+                roll.name + "_end",
+                len(nodes) - 1,
+                np.array([0.0, -1.0, 0.0]),
+                [],
+                np.zeros((len(nodes[0].values), 0)),
+                True,
+            )
+        )
 
 
 def _along_x(nodes: list[_Node]) -> None:
@@ -156,12 +306,18 @@ def _text(nodes: list[_Node], frame_time: float) -> str:
         node, pad = nodes[i], "  " * depth
         x, y, z = node.offset
         if node.end_site:
-            lines.extend([f"{pad}End Site", f"{pad}{{", f"{pad}  OFFSET {x:.6f} {y:.6f} {z:.6f}",
-                          f"{pad}}}"])
+            lines.extend(
+                [f"{pad}End Site", f"{pad}{{", f"{pad}  OFFSET {x:.6f} {y:.6f} {z:.6f}", f"{pad}}}"]
+            )
             return
-        lines.extend([f"{pad}{'ROOT' if node.parent < 0 else 'JOINT'} {node.name}", f"{pad}{{",
-                      f"{pad}  OFFSET {x:.6f} {y:.6f} {z:.6f}",
-                      f"{pad}  CHANNELS {len(node.channels)} {' '.join(node.channels)}"])
+        lines.extend(
+            [
+                f"{pad}{'ROOT' if node.parent < 0 else 'JOINT'} {node.name}",
+                f"{pad}{{",
+                f"{pad}  OFFSET {x:.6f} {y:.6f} {z:.6f}",
+                f"{pad}  CHANNELS {len(node.channels)} {' '.join(node.channels)}",
+            ]
+        )
         order.append(i)
         for c in children[i]:
             write(c, depth + 1)

@@ -21,25 +21,54 @@ from samba.synthetic.motions import generate
 _SIDED = ("UpperArm", "LowerArm", "Hand", "UpperLeg", "LowerLeg", "Foot")
 NAMES: dict[str, dict[str, str]] = {
     "unity": {name: name for name in BONE_NAMES},
-    "mixamo": {"Hips": "mixamorig:Hips", "Spine": "mixamorig:Spine", "Chest": "mixamorig:Spine1",
-               "Neck": "mixamorig:Neck", "Head": "mixamorig:Head"}
-    | {f"{s}{b}": f"mixamorig:{s}{m}" for s in ("Left", "Right")
-       for b, m in zip(_SIDED, ("Arm", "ForeArm", "Hand", "UpLeg", "Leg", "Foot"), strict=True)},
+    "mixamo": {
+        "Hips": "mixamorig:Hips",
+        "Spine": "mixamorig:Spine",
+        "Chest": "mixamorig:Spine1",
+        "Neck": "mixamorig:Neck",
+        "Head": "mixamorig:Head",
+    }
+    | {
+        f"{s}{b}": f"mixamorig:{s}{m}"
+        for s in ("Left", "Right")
+        for b, m in zip(_SIDED, ("Arm", "ForeArm", "Hand", "UpLeg", "Leg", "Foot"), strict=True)
+    },
     "blender": {"Hips": "hips", "Spine": "spine", "Chest": "chest", "Neck": "neck", "Head": "head"}
-    | {f"{s}{b}": f"{m}.{s[0]}" for s in ("Left", "Right")
-       for b, m in zip(_SIDED, ("upper_arm", "forearm", "hand", "thigh", "shin", "foot"),
-                       strict=True)},
-    "unreal": {"Hips": "pelvis", "Spine": "spine_01", "Chest": "spine_02", "Neck": "neck_01",
-               "Head": "head"}
-    | {f"{s}{b}": f"{m}_{s[0].lower()}" for s in ("Left", "Right")
-       for b, m in zip(_SIDED, ("upperarm", "lowerarm", "hand", "thigh", "calf", "foot"),
-                       strict=True)},
-    "character creator": {"Hips": "CC_Base_Pelvis", "Spine": "CC_Base_Waist",
-                          "Chest": "CC_Base_Spine01", "Neck": "CC_Base_NeckTwist01",
-                          "Head": "CC_Base_Head"}
-    | {f"{s}{b}": f"CC_Base_{s[0]}_{m}" for s in ("Left", "Right")
-       for b, m in zip(_SIDED, ("Upperarm", "Forearm", "Hand", "Thigh", "Calf", "Foot"),
-                       strict=True)},
+    | {
+        f"{s}{b}": f"{m}.{s[0]}"
+        for s in ("Left", "Right")
+        for b, m in zip(
+            _SIDED, ("upper_arm", "forearm", "hand", "thigh", "shin", "foot"), strict=True
+        )
+    },
+    "unreal": {
+        "Hips": "pelvis",
+        "Spine": "spine_01",
+        "Chest": "spine_02",
+        "Neck": "neck_01",
+        "Head": "head",
+    }
+    | {
+        f"{s}{b}": f"{m}_{s[0].lower()}"
+        for s in ("Left", "Right")
+        for b, m in zip(
+            _SIDED, ("upperarm", "lowerarm", "hand", "thigh", "calf", "foot"), strict=True
+        )
+    },
+    "character creator": {
+        "Hips": "CC_Base_Pelvis",
+        "Spine": "CC_Base_Waist",
+        "Chest": "CC_Base_Spine01",
+        "Neck": "CC_Base_NeckTwist01",
+        "Head": "CC_Base_Head",
+    }
+    | {
+        f"{s}{b}": f"CC_Base_{s[0]}_{m}"
+        for s in ("Left", "Right")
+        for b, m in zip(
+            _SIDED, ("Upperarm", "Forearm", "Hand", "Thigh", "Calf", "Foot"), strict=True
+        )
+    },
 }
 """Each convention's name of each humanoid bone."""
 HIPS_ABOVE_LEGS = (-0.07, 0.0, 0.08, 0.25)
@@ -54,8 +83,9 @@ def _avatar(tmp_path: Path, convention: str, hips_dy: float) -> tuple[Path, Huma
     rest[BONE_INDEX["Hips"]] = legs + np.array([0.0, hips_dy, 0.0])
     rig = HumanoidRig(rest=rest, tips=mannequin.tips)
     source = tmp_path / "unity.glb"
-    write_glb(source, HumanoidMotion(rig, np.tile([0.0, 0.0, 0.0, 1.0], (1, N_BONES, 1)),
-                                     rest[:1], 30.0))
+    write_glb(
+        source, HumanoidMotion(rig, np.tile([0.0, 0.0, 0.0, 1.0], (1, N_BONES, 1)), rest[:1], 30.0)
+    )
 
     def rename(doc: dict) -> None:
         for node in doc["nodes"]:

@@ -147,7 +147,7 @@ def test_a_take_on_the_avatar_keeps_directions_and_the_avatars_proportions(
 def test_an_avatar_whose_left_bones_no_name_says_is_read_by_its_structure(
     tmp_path: Path, avatar_glb: bytes
 ) -> None:
-    """"LeftUpperArm" renamed "bone_UpperArm" (no side in the name): the resolver places
+    """ "LeftUpperArm" renamed "bone_UpperArm" (no side in the name): the resolver places
     the left limbs by the tree, opposite the named right ones, and the rig is the same."""
 
     def rename(doc: dict) -> None:

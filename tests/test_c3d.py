@@ -20,18 +20,6 @@ from samba.ingest.marker_sets import MarkerSet
 from samba.synthetic.motions import generate
 
 
-@pytest.fixture(scope="module")
-def c3d_dir() -> Path:
-    from conftest import shared_data_dir
-
-    data = shared_data_dir()
-    if data is None or not (data / "c3d" / "85_02.c3d").is_file():
-        pytest.skip(
-            "real C3D data not found: set SAMBA_DATA or put ../shared/data/c3d beside the project"
-        )
-    return data / "c3d"
-
-
 @pytest.mark.parametrize(("name", "frames"), [("85_02", 810), ("85_12", 4499)])
 def test_the_shared_cmu_takes_read_as_eight_markers_upright_in_meters(
     c3d_dir: Path, name: str, frames: int
@@ -143,9 +131,7 @@ BASE = c3d_bytes(walk_points(8))
 )
 @given(
     cut=st.integers(min_value=0, max_value=len(BASE)),
-    flips=st.lists(
-        st.tuples(st.integers(0, len(BASE) - 1), st.integers(0, 255)), max_size=12
-    ),
+    flips=st.lists(st.tuples(st.integers(0, len(BASE) - 1), st.integers(0, 255)), max_size=12),
 )
 def test_mangled_files_import_or_raise_our_error(tmp_path: Path, cut: int, flips: list) -> None:
     """Cut anywhere, bytes overwritten anywhere: a take or a `SambaError` naming the file."""

@@ -234,10 +234,21 @@ def test_demo_with_an_avatar_streams_and_exports_onto_it(tmp_path: Path, capsys)
     rest[BONE_INDEX["Hips"], 1] += 0.12
     rig = HumanoidRig(rest=rest, tips=mannequin.tips)
     avatar = tmp_path / "tall-hips.glb"
-    write_glb(avatar, HumanoidMotion(rig, np.tile([0.0, 0.0, 0.0, 1.0], (1, 17, 1)),
-                                     rest[:1], 30.0))
-    code, out, _ = run(capsys, "demo", "--out", str(tmp_path / "demo"), "--seconds", "1.5",
-                       "--vmc", "127.0.0.1:9", "--avatar", str(avatar))
+    write_glb(
+        avatar, HumanoidMotion(rig, np.tile([0.0, 0.0, 0.0, 1.0], (1, 17, 1)), rest[:1], 30.0)
+    )
+    code, out, _ = run(
+        capsys,
+        "demo",
+        "--out",
+        str(tmp_path / "demo"),
+        "--seconds",
+        "1.5",
+        "--vmc",
+        "127.0.0.1:9",
+        "--avatar",
+        str(avatar),
+    )
     assert code == 0 and "frames out: 90 of 90" in out
     names, joints = read_glb_joint_positions(tmp_path / "demo" / "exports" / "demo_walk.glb")
     hips, feet = names.index("Hips"), [names.index("LeftFoot"), names.index("RightFoot")]

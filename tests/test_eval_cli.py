@@ -125,7 +125,7 @@ def test_eval_input_errors_name_the_input(picked, tmp_path: Path, capsys) -> Non
     empty = tmp_path / "empty"
     empty.mkdir()
     code, _, err = run(capsys, "eval", "--train", *picked, "--test", str(empty))
-    assert code == 1 and "--test" in err and "no .bvh files" in err
+    assert code == 1 and "--test" in err and "no .bvh or .c3d files" in err
 
     a_file = tmp_path / "plots.txt"
     a_file.write_text("not a folder")
@@ -160,8 +160,7 @@ def test_evaluate_in_memory_leaves_each_test_take_out() -> None:
     )
     assert seen.left_out == ("walk2",) and seen.mode.startswith("mixed")
     assert (
-        seen.summaries["nn"]["per_take_cm"]["walk1"]
-        < 0.5 * summaries["nn"]["per_take_cm"]["walk1"]
+        seen.summaries["nn"]["per_take_cm"]["walk1"] < 0.5 * summaries["nn"]["per_take_cm"]["walk1"]
     )
     # the capture depends only on the seed: the same run gives the same errors
     again = evaluate(takes, takes, {"chai": method("chai")}, PoseIndex.build, seed=3)

@@ -17,9 +17,11 @@ from samba.ingest.errors import RigError
 from samba.ingest.rigs import RigMap
 
 RIGS = ("cgspeed_131_01", "iclone_002_01", "daz_salsa_01")
-VARIANTS = [(name, ()) for name in CONVENTIONS] + [
-    ("game studio", (structure,)) for structure in STRUCTURES
-] + [("game studio", STRUCTURES)]
+VARIANTS = (
+    [(name, ()) for name in CONVENTIONS]
+    + [("game studio", (structure,)) for structure in STRUCTURES]
+    + [("game studio", STRUCTURES)]
+)
 
 
 @pytest.mark.parametrize("rig", RIGS)
@@ -51,9 +53,14 @@ def _bvh(joints: list[tuple[str, str | None, tuple[float, float, float]]]) -> st
         name, parent, (x, y, z) = joints[i]
         pad = "  " * depth
         channels = "6 Xposition Yposition Zposition" if parent is None else "3"
-        lines.extend([f"{pad}{'ROOT' if parent is None else 'JOINT'} {name}", f"{pad}{{",
-                      f"{pad}  OFFSET {x} {y} {z}",
-                      f"{pad}  CHANNELS {channels} Zrotation Xrotation Yrotation"])
+        lines.extend(
+            [
+                f"{pad}{'ROOT' if parent is None else 'JOINT'} {name}",
+                f"{pad}{{",
+                f"{pad}  OFFSET {x} {y} {z}",
+                f"{pad}  CHANNELS {channels} Zrotation Xrotation Yrotation",
+            ]
+        )
         count += 6 if parent is None else 3
         for c in children.get(name, []):
             write(c, depth + 1)
@@ -69,18 +76,29 @@ def _bvh(joints: list[tuple[str, str | None, tuple[float, float, float]]]) -> st
 
 
 QUADRUPED = [
-    ("Hips", None, (0, 60, 0)), ("Spine", "Hips", (0, 0, 30)), ("Chest", "Spine", (0, 0, 30)),
-    ("Neck", "Chest", (0, 10, 15)), ("Head", "Neck", (0, 5, 15)),
-    ("LeftUpLeg", "Hips", (10, 0, 0)), ("LeftLeg", "LeftUpLeg", (0, -30, 0)),
-    ("LeftFoot", "LeftLeg", (0, -28, 0)), ("RightUpLeg", "Hips", (-10, 0, 0)),
-    ("RightLeg", "RightUpLeg", (0, -30, 0)), ("RightFoot", "RightLeg", (0, -28, 0)),
-    ("LeftArm", "Chest", (10, 0, 0)), ("LeftForeArm", "LeftArm", (0, -30, 0)),
-    ("LeftHand", "LeftForeArm", (0, -28, 0)), ("RightArm", "Chest", (-10, 0, 0)),
-    ("RightForeArm", "RightArm", (0, -30, 0)), ("RightHand", "RightForeArm", (0, -28, 0)),
+    ("Hips", None, (0, 60, 0)),
+    ("Spine", "Hips", (0, 0, 30)),
+    ("Chest", "Spine", (0, 0, 30)),
+    ("Neck", "Chest", (0, 10, 15)),
+    ("Head", "Neck", (0, 5, 15)),
+    ("LeftUpLeg", "Hips", (10, 0, 0)),
+    ("LeftLeg", "LeftUpLeg", (0, -30, 0)),
+    ("LeftFoot", "LeftLeg", (0, -28, 0)),
+    ("RightUpLeg", "Hips", (-10, 0, 0)),
+    ("RightLeg", "RightUpLeg", (0, -30, 0)),
+    ("RightFoot", "RightLeg", (0, -28, 0)),
+    ("LeftArm", "Chest", (10, 0, 0)),
+    ("LeftForeArm", "LeftArm", (0, -30, 0)),
+    ("LeftHand", "LeftForeArm", (0, -28, 0)),
+    ("RightArm", "Chest", (-10, 0, 0)),
+    ("RightForeArm", "RightArm", (0, -30, 0)),
+    ("RightHand", "RightForeArm", (0, -28, 0)),
 ]
 """A four-legged rig, its legs named as a humanoid's arms and legs."""
 TAIL = [
-    ("Tail", "Hips", (0, 0, -20)), ("Tail1", "Tail", (0, 0, -20)), ("Tail2", "Tail1", (0, 0, -20))
+    ("Tail", "Hips", (0, 0, -20)),
+    ("Tail1", "Tail", (0, 0, -20)),
+    ("Tail2", "Tail1", (0, 0, -20)),
 ]
 
 
@@ -88,6 +106,8 @@ def _unnamed(rig: list[tuple[str, str | None, tuple[float, float, float]]]) -> l
     """`rig` with every joint named "Bone<i>": nothing but the tree to go by."""
     names = {name: f"Bone{i}" for i, (name, _, _) in enumerate(rig)}
     return [(names[n], names.get(p), o) for n, p, o in rig]
+
+
 HAND = [("hand_r", None, (0, 100, 0))] + [
     joint
     for k, finger in enumerate(("thumb", "index", "middle", "ring", "pinky"))

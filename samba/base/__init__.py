@@ -10,6 +10,7 @@ from samba.base.arguments import (
     natural,
     positive,
     positive_float,
+    seconds_range,
 )
 from samba.base.atomic_file import atomic_path, write_bytes_atomic, write_text_atomic
 from samba.base.errors import InputError, SambaError
@@ -24,6 +25,7 @@ __all__ = [
     "natural",
     "positive",
     "positive_float",
+    "seconds_range",
     "write_bytes_atomic",
     "write_text_atomic",
 ]

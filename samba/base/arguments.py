@@ -44,6 +44,17 @@ def positive_float(text: str) -> float:
     return value
 
 
+def seconds_range(text: str) -> tuple[float, float]:
+    """(start, stop) seconds from an `A:B` word, 0 <= A < B (a stretch of a take)."""
+    start_text, sep, stop_text = text.partition(":")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected START:STOP in seconds, got {text!r}")
+    start, stop = finite_float(start_text), finite_float(stop_text)
+    if not 0 <= start < stop:
+        raise argparse.ArgumentTypeError(f"need 0 <= START < STOP, got {text!r}")
+    return start, stop
+
+
 def address(text: str) -> tuple[str, int]:
     """(host, port) from a `HOST:PORT` word (IPv4 address or host name, port 1..65535)."""
     return _host_port(text, lowest_port=1)

@@ -1,6 +1,7 @@
 """The 13-joint body every part of Samba shares: joints, the 8-marker set, bones and the
 standard pose (`skeleton`), forward kinematics, the canonical alignment of markers, takes,
-line-segment distances, and the capsule body model of the markerless modes.
+line-segment distances, the frame of the segment each joint rides on, and the capsule body
+model of the markerless modes.
 """
 
 from samba.body.alignment import Alignment, align_markers, has_heading
@@ -23,6 +24,7 @@ from samba.body.kinematics import (
     unit_vectors,
     whole_fps,
 )
+from samba.body.segment_frames import SEGMENT_OF, joint_frames, trunk_frames
 from samba.body.segments import point_segment_distances, segment_distances
 from samba.body.skeleton import (
     BONES,
@@ -57,6 +59,7 @@ __all__ = [
     "N_JOINTS",
     "N_MARKERS",
     "PART_NAMES",
+    "SEGMENT_OF",
     "TORSO_EDGES",
     "UNOBSERVED_JOINTS",
     "Alignment",
@@ -70,6 +73,7 @@ __all__ = [
     "facing_directions",
     "forward_kinematics",
     "has_heading",
+    "joint_frames",
     "markers_of",
     "mean_facing",
     "mirror_poses",
@@ -82,6 +86,7 @@ __all__ = [
     "segment_distances",
     "standard_pose",
     "standing_pose",
+    "trunk_frames",
     "unit_vectors",
     "whole_fps",
 ]

@@ -96,7 +96,7 @@ def evaluate(
         database = [p for other, p in train if other != name]
         if not database:
             raise InputError("--train", f"no training take is left for test take {name}")
-        indexes = _Indexes(np.concatenate(database), build_index)
+        indexes = DatabaseIndexes(np.concatenate(database), build_index)
         take = capture_take(name, poses, seed=seed + number, dropout=dropout, new_user=new_user)
         for label, m in runs.items():
             index = indexes.get(m.mirrored_database)
@@ -111,8 +111,8 @@ def evaluate(
     return Evaluation(results, left_out, frames, names, seed, dropout, new_user)
 
 
-class _Indexes:
-    """The pose indexes of one test take's database, plain and mirrored, built on demand."""
+class DatabaseIndexes:
+    """The pose indexes of a database, plain and mirrored, each built on first use."""
 
     def __init__(self, poses: np.ndarray, build: IndexBuilder) -> None:
         self.poses = poses

@@ -19,8 +19,10 @@ import numpy as np
 
 from samba.body import JOINT_NAMES, MARKER_JOINTS, UNOBSERVED_JOINTS
 from samba.markers import evaluation_cameras, new_user_factors, observe_markers, scale_limbs
-from samba.reconstruct import Reconstructor
+from samba.reconstruct import Reconstructor, SkinMarkerReconstructor
 
+EVALUATION_FPS = 30.0
+"""Frame rate every test take is evaluated at."""
 REFERENCE_TIBIA = 0.45
 """Knee-to-ankle length (m) every take is scaled to before MPJPE in cm (the paper's)."""
 
@@ -61,7 +63,8 @@ def capture_take(
 class TakeErrors:
     """One take reconstructed by one method: `errors` (F, 13) joint position errors in
     meters, `scale` to the reference tibia, `frame_seconds` (F,) live-path time per
-    frame, `batch_seconds` for the whole take offline, `predicted` (F,) bool."""
+    frame, `batch_seconds` for the whole take offline, `predicted` (F,) bool, `poses`
+    (F, 13, 3) the live path's poses, meters."""
 
     name: str
     errors: np.ndarray
@@ -69,6 +72,7 @@ class TakeErrors:
     frame_seconds: np.ndarray
     batch_seconds: float
     predicted: np.ndarray
+    poses: np.ndarray
 
     @property
     def mpjpe_cm(self) -> float:
@@ -82,7 +86,9 @@ def tibia_scale(poses: np.ndarray) -> float:
     return REFERENCE_TIBIA / float(shins.mean())
 
 
-def run_method(reconstructor: Reconstructor, take: CapturedTake) -> TakeErrors:
+def run_method(
+    reconstructor: Reconstructor | SkinMarkerReconstructor, take: CapturedTake
+) -> TakeErrors:
     """Reconstruct a captured take frame by frame (timed, the live path) and as one batch
     (timed, the offline path); the live poses are scored."""
     reconstructor.reset()
@@ -101,7 +107,8 @@ def run_method(reconstructor: Reconstructor, take: CapturedTake) -> TakeErrors:
     reconstructor.reconstruct(take.markers)
     batch = clock() - start
     errors = np.linalg.norm(poses - take.truth, axis=-1)
-    return TakeErrors(take.name, errors, tibia_scale(take.truth), seconds, batch, predicted)
+    scale = tibia_scale(take.truth)
+    return TakeErrors(take.name, errors, scale, seconds, batch, predicted, poses)
 
 
 def summarize(results: Sequence[TakeErrors]) -> dict[str, object]:

@@ -193,4 +193,3 @@ def _below(joint: int) -> list[int]:
         if parent in out:
             out.append(child)
     return out
-

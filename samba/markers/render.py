@@ -294,4 +294,3 @@ def _capsule_endpoints() -> tuple[np.ndarray, np.ndarray]:
     starts[neck, [1, 2]] = 0.5
     ends[neck, 0] = 1.0  # head
     return starts, ends
-

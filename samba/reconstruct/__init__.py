@@ -1,6 +1,7 @@
 """13 joints from 8 markers: the Samba paper's reconstruction (retrieval, pseudo-poses, local
 pose space, energy solve) and our joint-specific part retrieval, with the named method
-presets (`nn`, `chai`, `samba`, `best`). The pose database comes in as a `NeighbourSource`.
+presets (`nn`, `chai`, `samba`, `best`), and a subject's skin-marker offsets (calibrated from
+its own take, removed before retrieval). The pose database comes in as a `NeighbourSource`.
 """
 
 from samba.reconstruct.methods import METHODS, Method, method
@@ -11,6 +12,11 @@ from samba.reconstruct.reconstruction import (
     Reconstructor,
     reconstruct_together,
 )
+from samba.reconstruct.skin_offsets import (
+    SkinMarkerReconstructor,
+    SkinOffsets,
+    calibrate_skin_offsets,
+)
 
 __all__ = [
     "METHODS",
@@ -19,6 +25,9 @@ __all__ = [
     "PoseEstimate",
     "ReconstructionConfig",
     "Reconstructor",
+    "SkinMarkerReconstructor",
+    "SkinOffsets",
+    "calibrate_skin_offsets",
     "method",
     "reconstruct_together",
 ]

@@ -195,6 +195,25 @@ class Reconstructor:
         """Forget the previous estimates."""
         self._history = []
 
+    @property
+    def history(self) -> list[np.ndarray]:
+        """The last two estimates (39,) world meters, newest first (fewer at a take's
+        start); set it to go back to an earlier state."""
+        return list(self._history)
+
+    @history.setter
+    def history(self, estimates: list[np.ndarray]) -> None:
+        self._history = list(estimates)[:2]
+
+    def prediction(self) -> np.ndarray | None:
+        """The pose (13, 3) world meters the last two estimates predict for the next frame
+        at constant velocity (the last estimate after one frame), None before any."""
+        if not self._history:
+            return None
+        if len(self._history) == 1:
+            return self._history[0].reshape(N_JOINTS, 3)
+        return (2.0 * self._history[0] - self._history[1]).reshape(N_JOINTS, 3)
+
     def step(self, markers: np.ndarray) -> PoseEstimate:
         """Reconstruct one frame from markers (8, 3), world meters, NaN = missing."""
         return self.reconstruct(np.asarray(markers, dtype=np.float64)[None]).estimate(0)

@@ -1,0 +1,112 @@
+"""Marker takes from any file that holds them: a C3D file (`samba.ingest.c3d_take`) or a
+take the live service recorded (its `/markers` topic: the triangulated 8 markers).
+
+`read_marker_take` picks the reader by the file's suffix. A recorded take's markers keep
+their recorded timing: frames dropped in the recording are put back on a regular grid
+as `samba.ingest.mcap_take.read_take` does for its poses (interpolated across short gaps).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+from pathlib import Path
+
+import numpy as np
+from mcap.records import Channel, Message, Metadata
+
+from samba.body import MARKER_NAMES, N_MARKERS
+from samba.ingest.c3d_take import MarkerTake, read_c3d
+from samba.ingest.errors import TakeFileError
+from samba.ingest.marker_sets import PLUG_IN_GAIT, MarkerSet
+from samba.ingest.mcap_take import TAKE_METADATA, RecordStream, on_the_clock
+
+MARKER_TOPIC = "/markers"
+"""Topic of the triangulated markers in a recorded take (`foxglove.PointCloud`: x, y, z
+float32 and the marker's number uint32 per present marker)."""
+_POINT = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("marker", "<u4")])
+
+
+def read_marker_take(path: str | Path, marker_set: MarkerSet = PLUG_IN_GAIT) -> MarkerTake:
+    """The marker take in `path`: a `.c3d` file (its 8 markers by `marker_set`) or a take
+    recorded by `samba serve` (`.mcap`). Raises `C3dError` / `TakeFileError` naming the
+    file, or `TakeFileError` for another suffix."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".c3d":
+        return read_c3d(path, marker_set)
+    if suffix == ".mcap":
+        return read_recorded_markers(path)
+    raise TakeFileError(str(path), "marker takes are .c3d files or takes recorded by samba (.mcap)")
+
+
+def read_recorded_markers(path: str | Path) -> MarkerTake:
+    """The 8 markers (n, 8, 3) meters, NaN = missing, that the live service triangulated
+    and recorded in the take `path`, on a regular grid at the take's fps. `TakeFileError`
+    naming the file when it cannot be read, is not a take or holds no markers."""
+    path = Path(path)
+    source = str(path)
+    try:
+        stream = path.open("rb")
+    except OSError as exc:
+        raise TakeFileError(source, f"cannot read file: {exc.strerror or exc}") from exc
+    meta: dict[str, str] | None = None
+    channels: set[int] = set()
+    frames: list[np.ndarray] = []
+    times: list[int] = []
+    with stream:
+        records = RecordStream(stream, path.stat().st_size)
+        for record in records:
+            if isinstance(record, Metadata) and record.name == TAKE_METADATA:
+                meta = dict(record.metadata)
+            elif isinstance(record, Channel) and record.topic == MARKER_TOPIC:
+                channels.add(record.id)
+            elif isinstance(record, Message) and record.channel_id in channels:
+                frames.append(_markers(record, source, len(frames)))
+                times.append(record.log_time)
+    if records.count == 0:
+        raise TakeFileError(source, f"not an MCAP file ({records.error})")
+    if meta is None:
+        raise TakeFileError(source, "no take metadata: not a take recorded by samba")
+    if not frames:
+        raise TakeFileError(source, f"holds no {MARKER_TOPIC} messages (no recorded markers)")
+    try:
+        fps = float(meta.get("fps", ""))
+    except ValueError:
+        fps = 0.0
+    if not 0 < fps < float("inf"):
+        raise TakeFileError(source, f"take metadata has no valid fps: {meta.get('fps')!r}")
+    markers, gaps = on_the_clock(np.stack(frames), np.array(times, dtype=np.int64), fps)
+    markers = np.asarray(markers, dtype=np.float64)
+    notes = [gaps] if gaps else []
+    if records.error:
+        notes.append(f"file cut short or damaged ({records.error}): read {len(frames)} frames")
+    return MarkerTake(
+        name=meta.get("name") or path.stem,
+        points=markers,
+        labels=MARKER_NAMES,
+        markers=markers,
+        fps=fps,
+        source=str(path.resolve()),
+        marker_set="samba",
+        warnings=notes,
+        meta={"format": "mcap"},
+    )
+
+
+def _markers(message: Message, source: str, index: int) -> np.ndarray:
+    """The (8, 3) markers of a `/markers` message, meters, NaN where absent."""
+    where = f"{MARKER_TOPIC} message {index}"
+    try:
+        cloud = json.loads(message.data)
+        if cloud["point_stride"] != _POINT.itemsize:
+            raise ValueError(f"point stride {cloud['point_stride']}, not {_POINT.itemsize}")
+        points = np.frombuffer(base64.b64decode(cloud["data"], validate=True), dtype=_POINT)
+    except (KeyError, ValueError, TypeError) as exc:
+        raise TakeFileError(source, f"{where} is malformed: {exc}") from None
+    if (points["marker"] >= N_MARKERS).any():
+        raise TakeFileError(source, f"{where} names a marker beyond the {N_MARKERS}")
+    markers = np.full((N_MARKERS, 3), np.nan)
+    for axis, name in enumerate("xyz"):
+        markers[points["marker"], axis] = points[name]
+    return markers
