@@ -24,18 +24,6 @@ BONES = {
 }
 
 
-@pytest.fixture(scope="module")
-def c3d_dir() -> Path:
-    from conftest import shared_data_dir
-
-    data = shared_data_dir()
-    if data is None or not (data / "c3d" / "85_02.c3d").is_file():
-        pytest.skip(
-            "real C3D data not found: set SAMBA_DATA or put ../shared/data/c3d beside the project"
-        )
-    return data / "c3d"
-
-
 @cache
 def _reference(path: Path) -> tuple[MarkerTake, np.ndarray]:
     take = read_c3d(path)
