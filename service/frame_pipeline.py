@@ -28,9 +28,16 @@ from samba.body import N_MARKERS
 from samba.cameras import Triangulation, read_calibration
 from samba.export import HumanoidRig, LiveRetarget, read_avatar_rig, retarget_together
 from samba.markers import CrossViewSettings, StageTracker
-from samba.reconstruct import PoseEstimate, ReconstructionConfig, method, reconstruct_together
+from samba.reconstruct import (
+    PoseEstimate,
+    ReconstructionConfig,
+    SkinOffsets,
+    method,
+    reconstruct_together,
+)
 from samba.service.session_config import SessionConfig
 from samba.service.session_indexes import SessionIndexes
+from samba.service.subject_calibration import SubjectCalibration
 from samba.service.vmc import VmcSender, frame_bundles, unity_values
 
 PREPARED_MISSING = 2
@@ -73,8 +80,9 @@ class FrameOutput:
     labels or the nodes'; (0, 8, 2) for a pose session), `markers` (8, 3) triangulated
     meters (NaN = missing), the reconstruction `estimate`, the `latency` in seconds from
     the frame's last packet to its VMC bundles sent, `vmc_errors`, the VMC datagrams
-    the network refused so far in this session, and `found_again`: whether the server's
-    labelling found the subject again in this frame after losing it (`StageTracker`)."""
+    the network refused so far in this session, `found_again`: whether the server's
+    labelling found the subject again in this frame after losing it (`StageTracker`),
+    and `subject`: the session's skin offsets once calibrated (`calibrate_s`)."""
 
     labels: np.ndarray
     markers: np.ndarray
@@ -82,6 +90,7 @@ class FrameOutput:
     latency: float
     vmc_errors: int
     found_again: bool = False
+    subject: SkinOffsets | None = None
 
 
 class AvatarStream:
@@ -138,6 +147,11 @@ class FramePipeline:
         self._stage: StageTracker | None = None
         self.server_labels = config.server_labels(len(self.cameras))
         """Whether the server finds the labels the nodes lost (`labels`)."""
+        frames = round(config.calibrate_s * config.fps)
+        self.subject = (
+            SubjectCalibration(self.reconstructor, frames, config.name) if frames else None
+        )
+        """The subject calibration of a session with `calibrate_s` (None without)."""
 
     @property
     def database_poses(self) -> int:
@@ -183,9 +197,21 @@ class FramePipeline:
         its output."""
         errors = self.avatar.emit(*retargeted, frame_time)
         latency = time.time() - last_arrival
+        subject = None if self.subject is None else self.subject.offsets
         return FrameOutput(
-            observed.labels, observed.markers, estimate, latency, errors, observed.found_again
+            observed.labels,
+            observed.markers,
+            estimate,
+            latency,
+            errors,
+            observed.found_again,
+            subject,
         )
+
+    def joints(self, markers: np.ndarray) -> np.ndarray:
+        """The markers (8, 3) to reconstruct from triangulated ones: moved to their joints
+        by the subject's skin offsets once calibrated (`SubjectCalibration.joints`)."""
+        return markers if self.subject is None else self.subject.joints(markers)
 
     def _label(self, frame: CameraMarkers) -> np.ndarray:
         """The labels (c, 8, 2) to triangulate: the nodes' (without `server_labels`, and
@@ -265,9 +291,8 @@ def process_together(jobs: Sequence[FrameJob]) -> list[FrameOutput | Exception]:
         else:
             kept.append(i)
     if kept:
-        result = reconstruct_together(
-            [jobs[i][0].reconstructor for i in kept], np.stack([o.markers for o in observed])
-        )
+        markers = [jobs[i][0].joints(o.markers) for i, o in zip(kept, observed, strict=True)]
+        result = reconstruct_together([jobs[i][0].reconstructor for i in kept], np.stack(markers))
         retargets = [jobs[i][0].avatar.retarget for i in kept]
         rotations, roots = retarget_together(retargets, result.poses)
         for row, i in enumerate(kept):

@@ -188,6 +188,8 @@ class CaptureSession:
             sent = np.stack([frame.packets[c].markers for c in cameras])
             self.labels.add(sent, output.labels[cameras], output.found_again)
         if self._recorder is not None:
+            if output.subject is not None and not self._recorder.subject_written:
+                self._recorder.write_subject(output.subject)
             self._recorder.write_frame(
                 max(0, round(frame.time * 1e9)),
                 estimate,

@@ -17,6 +17,11 @@ A session comes from `samba serve` flags, from a `[[session]]` table of a TOML f
 | `min_cameras` | integer | 2 | fewest cameras a frame is reconstructed from |
 | `gate_px` | number | 10 | triangulation outlier gate, pixels (0 = none) |
 | `labels` | string | `"auto"` | who labels the markers: `"server"`, `"nodes"` or `"auto"` (below) |
+| `calibrate_s` | number | 0 | seconds of markers that calibrate the subject (0: none; below) |
+
+With `calibrate_s` > 0 a marker session calibrates its subject's skin-marker offsets
+from its first `calibrate_s` seconds of markers and removes them from every frame after
+(`samba.service.subject_calibration`); its takes store them.
 
 Relative paths in a file are relative to the file's folder. A `"markers"` session
 (the default) takes the marker packets of its calibrated cameras and needs
@@ -73,6 +78,7 @@ _KEYS = (
     "min_cameras",
     "gate_px",
     "labels",
+    "calibrate_s",
 )
 
 
@@ -92,6 +98,7 @@ class SessionConfig:
     gate_px: float = 10.0
     input: str = "markers"
     labels: str = "auto"
+    calibrate_s: float = 0.0
 
     def server_labels(self, cameras: int) -> bool:
         """Whether the server finds the labels the nodes lost (`labels`) in a marker
@@ -155,6 +162,7 @@ class SessionConfig:
             gate_px=_number(values, "gate_px", where, 10.0, allow_zero=True),
             input=kind,
             labels=labels,
+            calibrate_s=_number(values, "calibrate_s", where, 0.0, allow_zero=True),
         )
 
 

@@ -136,6 +136,7 @@ class TakeRecorder:
         self.name = name or self.path.stem
         self.fps = float(fps)
         self.frames_written = 0
+        self.subject_written = False
         self._flush_interval_s = flush_interval_s
         try:
             self._file = self.path.open("xb")
@@ -226,6 +227,7 @@ class TakeRecorder:
         `Take.meta["skin_offsets"]`."""
         document = json.dumps(offsets.as_dict(), separators=(",", ":"))
         self._writer.add_metadata(SUBJECT_METADATA, {"skin_offsets": document})
+        self.subject_written = True
 
     def flush(self) -> None:
         """Write the open chunk and hand everything to the operating system (no fsync):

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from samba.base import address, bind_address, natural, positive_float
+from samba.base import address, bind_address, finite_float, natural, positive_float
 from samba.reconstruct import METHODS
 from samba.service.packet import read_key_file
 from samba.service.serve import (
@@ -66,6 +66,14 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="who labels the markers: the server finds the labels the nodes lost from "
         "every camera's blobs (server), or the nodes' labels as sent (nodes); auto "
         "(default): server with 3 or more cameras",
+    )
+    one.add_argument(
+        "--calibrate-subject",
+        type=finite_float,
+        default=0.0,
+        metavar="SECONDS",
+        help="calibrate the subject's skin-marker offsets from the session's first SECONDS "
+        "(the subject moves naturally meanwhile) and remove them after; stored with takes",
     )
     net = parser.add_argument_group("network")
     net.add_argument(
@@ -150,6 +158,7 @@ def _configs(args: argparse.Namespace) -> list[SessionConfig]:
         "vmc": [f"{host}:{port}" for host, port in args.vmc],
         "wait_ms": args.wait_ms,
         "labels": args.labels,
+        "calibrate_s": args.calibrate_subject,
     }
     for key, value in (("calibration", args.calib), ("database", args.db), ("avatar", args.avatar)):
         if value:

@@ -1,0 +1,55 @@
+"""A live session that calibrates its subject from its first seconds: the frames before go
+out as always, the offsets are removed after, and the take stores them."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from live_fixtures import config, offline_poses, until
+
+from samba.ingest.mcap_take import read_take
+from samba.reconstruct import SkinOffsets
+from samba.service.errors import ServiceError
+from samba.service.serve import LiveServer
+from samba.service.synthetic_capture import SyntheticCapture, play
+
+
+@pytest.mark.parametrize("workers", [0, 2], ids=["in the event loop", "in worker processes"])
+def test_a_session_calibrates_its_subject_and_stores_the_offsets_with_its_take(
+    live_store: Path,
+    live_calibration: Path,
+    live_capture: SyntheticCapture,
+    tmp_path: Path,
+    workers: int,
+) -> None:
+    async def run() -> None:
+        cfg = config(live_calibration, live_store, wait_ms=200, calibrate_s=0.5)
+        bind = {"udp": ("127.0.0.1", 0), "http": None, "workers": workers}
+        async with LiveServer([cfg], tmp_path / "takes", **bind) as live:
+            assert live.server is not None
+            session = live.server.session("stage")
+            session.start_take("walk")
+            await play(live_capture, live.udp_address, time.time() + 0.2, session="stage")
+            await until(lambda: session.frames_out == live_capture.frames)
+            session.stop_take()
+
+    asyncio.run(run())
+    take = read_take(tmp_path / "takes" / "stage" / "walk.mcap")
+    assert len(take) == live_capture.frames
+    offsets = SkinOffsets.from_dict(json.loads(take.meta["skin_offsets"]))
+    assert offsets.frames == 30  # 0.5 s at 60 fps
+    assert np.linalg.norm(offsets.offsets, axis=1).max() < 0.08  # these markers sit on joints
+    before = offline_poses(live_capture, live_store)[:30]
+    assert np.linalg.norm(take.poses[:30] - before, axis=-1).max() < 0.001  # as always
+
+
+def test_calibrate_s_must_be_a_number_of_seconds(live_store: Path, live_calibration: Path) -> None:
+    with pytest.raises(ServiceError, match="calibrate_s"):
+        config(live_calibration, live_store, calibrate_s=-1)
+    with pytest.raises(ServiceError, match="calibrate_s"):
+        config(live_calibration, live_store, calibrate_s="2 s")
