@@ -6,11 +6,13 @@
    39539, where VSeeFace / EVMC4U listen) and to a receiver of its own that counts what
    arrives.
 3. Two simulated camera nodes, each its own UDP socket, playing a held-out synthetic
-   motion (or `--motion FILE.bvh`) in real time: the markers projected into two
-   640x480 cameras with 0.3 px noise and 2% dropout, as a camera node's tracker reports
-   them.
+   motion (or `--motion FILE.bvh`, or the real markers of `--motion FILE.c3d`, see
+   `samba.service.marker_motion`) in real time: the markers projected into two 640x480
+   cameras with 0.3 px noise and 2% dropout, as a camera node's tracker reports them.
 4. A take recorded while they play, then exported to USD and glTF on the default
-   mannequin; a summary of frames, latency, accuracy against the truth and files written.
+   mannequin; a summary of frames, latency, accuracy against the truth (for a marker
+   take, which has no true joints: how high the recorded shoulders went, beside the
+   take's shoulder markers) and files written.
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ import numpy as np
 from samba.cameras import write_calibration
 from samba.db import PoseStore, build_synthetic_store
 from samba.export import Avatar, load_avatar, retarget, write_export
-from samba.ingest import BvhImportOptions, load_bvh_take, read_take
+from samba.ingest import PLUG_IN_GAIT, BvhImportOptions, MarkerSet, load_bvh_take, read_take
+from samba.service.marker_motion import MarkerMotion, is_marker_file
 from samba.service.serve import LiveServer
 from samba.service.session import CaptureSession
 from samba.service.session_config import SessionConfig
@@ -45,11 +48,12 @@ DRAIN_S = 10.0
 
 @dataclass(frozen=True)
 class DemoSettings:
-    """What `run_demo` plays: `motion` (a built-in motion's name or a BVH file) for
+    """What `run_demo` plays: `motion` (a built-in motion's name, a BVH file or a C3D
+    file, its markers by the marker-set file `marker_set`, None: Plug-in-Gait's) for
     `seconds` at `fps` camera frames per second; the pose store `db` (None: built from
     the built-in motions); VMC also to `vmc` (host, port); files kept in `out` (None: a
     temporary folder); the viewer opened in a browser when `open_viewer`; `seed` of the
-    database and the capture."""
+    database and the capture; `avatar` the avatar file streamed and exported onto."""
 
     motion: str = "walk"
     seconds: float = 8.0
@@ -60,19 +64,24 @@ class DemoSettings:
     open_viewer: bool = False
     seed: int = 0
     avatar: str | None = None
+    marker_set: str | None = None
 
 
 def run_demo(settings: DemoSettings) -> int:
     """Run the demo in `settings.out` or a temporary folder, printing each step; returns
-    the exit status (0)."""
+    the exit status (0). A motion or marker-set file that cannot be read stops it before
+    it makes anything (`C3dError`, `BvhError`, ...)."""
+    capture, motion_name = _capture(settings)
     if settings.out:
         Path(settings.out).mkdir(parents=True, exist_ok=True)
-        return asyncio.run(_demo(Path(settings.out), settings))
+        return asyncio.run(_demo(Path(settings.out), settings, capture, motion_name))
     with tempfile.TemporaryDirectory(prefix="samba-demo-") as folder:
-        return asyncio.run(_demo(Path(folder), settings))
+        return asyncio.run(_demo(Path(folder), settings, capture, motion_name))
 
 
-async def _demo(folder: Path, settings: DemoSettings) -> int:
+async def _demo(
+    folder: Path, settings: DemoSettings, capture: SyntheticCapture, motion_name: str
+) -> int:
     avatar = load_avatar(settings.avatar)  # a bad avatar file stops the demo before it builds
     t0 = time.perf_counter()
     if settings.db:
@@ -86,7 +95,6 @@ async def _demo(folder: Path, settings: DemoSettings) -> int:
         f"({time.perf_counter() - t0:.1f} s)"
     )
 
-    capture, motion_name = _capture(settings)
     calibration = folder / "cameras.toml"
     write_calibration(calibration, capture.cameras)
     counter = _VmcCounter()
@@ -144,7 +152,16 @@ def _all_out(session: CaptureSession, frames: int) -> bool:
 
 def _capture(settings: DemoSettings) -> tuple[SyntheticCapture, str]:
     """The motion the camera nodes play and its name: a built-in one (a seed the database
-    never saw) or a BVH file, `--seconds` of it."""
+    never saw), a BVH file or a C3D file's real markers, `--seconds` of it."""
+    if is_marker_file(settings.motion):
+        marker_set = PLUG_IN_GAIT
+        if settings.marker_set is not None:
+            marker_set = MarkerSet.from_toml(settings.marker_set)
+        motion = MarkerMotion.read(settings.motion, settings.fps, settings.seconds, marker_set)
+        capture = SyntheticCapture.of_markers(
+            motion.markers, motion.fps, dropout=0.02, seed=settings.seed
+        )
+        return capture, motion.name
     if settings.motion in MOTIONS:
         seed = 10_000 + settings.seed
         capture = SyntheticCapture.film(
@@ -175,13 +192,21 @@ def _report(
         f"p50 {latency['p50_ms']} ms, p99 {latency['p99_ms']} ms"
     )
     recorded = read_take(take_path)
-    truth = capture.take.poses[: len(recorded)]
-    error = np.linalg.norm(recorded.poses - truth, axis=-1) * 100
-    print(
-        f"   joint error against the truth: mean {error.mean():.1f} cm, markers "
-        f"{error[:, [1, 2, 5, 6, 9, 10, 11, 12]].mean():.1f} cm, other joints "
-        f"{error[:, [0, 3, 4, 7, 8]].mean():.1f} cm"
-    )
+    if capture.take is None:
+        shoulders, markers = recorded.poses[:, 1:3, 1], capture.markers[:, :2, 1]
+        print(
+            f"   a marker take has no true joints: recorded shoulders {shoulders.min():.2f} "
+            f"to {shoulders.max():.2f} m high, the take's shoulder markers "
+            f"{np.nanmin(markers):.2f} to {np.nanmax(markers):.2f} m"
+        )
+    else:
+        truth = capture.take.poses[: len(recorded)]
+        error = np.linalg.norm(recorded.poses - truth, axis=-1) * 100
+        print(
+            f"   joint error against the truth: mean {error.mean():.1f} cm, markers "
+            f"{error[:, [1, 2, 5, 6, 9, 10, 11, 12]].mean():.1f} cm, other joints "
+            f"{error[:, [0, 3, 4, 7, 8]].mean():.1f} cm"
+        )
     motion = retarget(recorded.poses, avatar.rig, recorded.fps)
     outputs = [folder / "exports" / f"{take_path.stem}.{s}" for s in ("usda", "glb")]
     outputs[0].parent.mkdir(exist_ok=True)

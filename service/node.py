@@ -15,8 +15,8 @@ Frames come from a feed, each frame a `Capture` with its capture time:
   as possible (timestamp start + index / fps);
 - `WebcamFeed`: an OpenCV camera (timestamp: the clock when the frame is grabbed);
 - `SyntheticFeed`: one camera of the synthetic rig filming a built-in motion
-  (`samba.synthetic.motions`) after the standing lead-in (`samba.markers.lead_in`),
-  rendered on the fly (`samba.markers.render`). Its frames are captured on a wall-clock
+  (`samba.synthetic.motions`) or a C3D file's real markers (`samba.service.marker_motion`)
+  after the standing lead-in (`samba.markers.lead_in`), rendered on the fly (`samba.markers.render`). Its frames are captured on a wall-clock
   grid, frame i at `start_at + i / fps`, and stamped with exactly that time, so that
   nodes of the same rig started separately with the same motion, seed and start time
   film the same subject at the same instants.
@@ -348,7 +348,8 @@ def synthetic_lead_in(motion: str, seconds: float, fps: float, seed: int) -> Lea
 class SyntheticFeed:
     """One camera of the synthetic rig filming a take live, on a wall-clock grid.
 
-    `camera` films `lead_in` (see `synthetic_lead_in`) at `fps`; frame i (counted over
+    `camera` films `lead_in` (`synthetic_lead_in`, or a marker take's
+    `samba.service.marker_motion.MarkerMotion.lead_in`) at `fps`; frame i (counted over
     repetitions when looping) is captured at `start_at + i / fps` UNIX seconds and
     stamped with exactly that time. With `pace` the feed sleeps until then; without it
     frames come as fast as they render. Noise derives from `seed` and `camera_id`, so

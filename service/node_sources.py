@@ -2,9 +2,10 @@
 one camera of the synthetic rig, and the node that turns them into packets (markers, or
 with a shape tree a markerless pose), for `samba node`.
 
-A synthetic source films a built-in motion after its standing lead-in on a wall-clock grid
-starting at `start_at` (default: `START_DELAY_SECONDS` from now), so that nodes of one rig
-started separately film the same instants.
+A synthetic source films a built-in motion, or the real markers of a C3D file
+(`samba.service.marker_motion`), after its standing lead-in on a wall-clock grid starting
+at `start_at` (default: `START_DELAY_SECONDS` from now), so that nodes of one rig started
+separately film the same instants.
 """
 
 from __future__ import annotations
@@ -17,6 +18,9 @@ from dataclasses import dataclass
 from samba.base import InputError
 from samba.body import BodyModel
 from samba.cameras import Camera, open_frames
+from samba.ingest import PLUG_IN_GAIT, MarkerSet
+from samba.markers import LeadIn, RenderOptions
+from samba.service.marker_motion import MARKER_TAKE_RENDER, MarkerMotion, is_marker_file
 from samba.service.node import (
     DEFAULT_FPS,
     CameraNode,
@@ -33,7 +37,8 @@ from samba.silhouette import ShapeTree, SilhouetteExtractor
 START_DELAY_SECONDS = 0.5
 """How far ahead of now the synthetic capture starts when `start_at` is not given."""
 DEFAULT_SYNTHETIC_SECONDS = 10.0
-"""Length of the synthetic motion (after the 1-s standing lead-in) by default."""
+"""Length of the synthetic motion (after the 1-s standing lead-in) by default; a marker
+file plays whole by default."""
 EMPTY_STAGE_FRAMES = 10
 """Frames of the synthetic stage the silhouette node learns the background from."""
 SOURCES = ("video", "images", "webcam", "synthetic")
@@ -43,10 +48,11 @@ SOURCES = ("video", "images", "webcam", "synthetic")
 @dataclass(frozen=True)
 class NodeSource:
     """Where a node's frames come from: `kind` (one of `SOURCES`) and `where` (the video
-    file, the image folder, the webcam index or the built-in motion). `fps`: the frame
-    rate (None: the video's own or the default); `pace` takes frames of files and the
-    synthetic rig at their frame rate on the clock, `loop` starts them over at the end.
-    `seconds`, `seed` and `start_at` (UNIX seconds) set a synthetic capture."""
+    file, the image folder, the webcam index, or the built-in motion or C3D marker file
+    of the synthetic rig). `fps`: the frame rate (None: the video's own or the default);
+    `pace` takes frames of files and the synthetic rig at their frame rate on the clock,
+    `loop` starts them over at the end. `seconds`, `seed` and `start_at` (UNIX seconds)
+    set a synthetic capture, `marker_set` the labels of a C3D file's 8 markers."""
 
     kind: str
     where: str | int
@@ -56,6 +62,7 @@ class NodeSource:
     seconds: float | None = None
     seed: int | None = None
     start_at: float | None = None
+    marker_set: MarkerSet = PLUG_IN_GAIT
 
     @property
     def synthetic_fps(self) -> float:
@@ -91,18 +98,38 @@ def open_marker_node(
     captures from `source`. `threshold`: the blob threshold (or "auto"); `start`: where
     the subject stands at first (a synthetic source knows its own)."""
     if source.kind == "synthetic":
-        seconds = source.seconds or DEFAULT_SYNTHETIC_SECONDS
         seed, fps = source.seed or 0, source.synthetic_fps
-        try:
-            lead_in = synthetic_lead_in(str(source.where), seconds, fps, seed)
-        except ValueError as exc:
-            raise InputError("--seconds", str(exc)) from None
+        lead_in, options = _synthetic_take(source)
         feed = SyntheticFeed(
-            camera, camera_id, lead_in, fps, seed, source.synthetic_start, source.pace, source.loop
+            camera,
+            camera_id,
+            lead_in,
+            fps,
+            seed,
+            source.synthetic_start,
+            source.pace,
+            source.loop,
+            options,
         )
         return CameraNode(camera, SubjectStart.of(lead_in), feed.mask, threshold), feed.captures()
     node = CameraNode(camera, start or SubjectStart(), threshold=threshold)
     return node, source.file_captures()
+
+
+def _synthetic_take(source: NodeSource) -> tuple[LeadIn, RenderOptions | None]:
+    """What the synthetic rig of `source` films, after its lead-in, and how (None: the
+    default `RenderOptions`): a C3D file's real markers (`MarkerMotion`, its first
+    `seconds` or all of it) or `seconds` of a built-in motion. `C3dError` for a bad
+    marker file, `InputError` naming `--seconds` when it gives no frame."""
+    where, fps = str(source.where), source.synthetic_fps
+    if is_marker_file(where):
+        motion = MarkerMotion.read(where, fps, source.seconds, source.marker_set)
+        return motion.lead_in(), MARKER_TAKE_RENDER
+    seconds = source.seconds or DEFAULT_SYNTHETIC_SECONDS
+    try:
+        return synthetic_lead_in(where, seconds, fps, source.seed or 0), None
+    except ValueError as exc:
+        raise InputError("--seconds", str(exc)) from None
 
 
 def open_silhouette_node(

@@ -4,7 +4,9 @@
 cameras around it (`samba.markers.observation.spread_cameras`) and projects the 8 markers into
 every camera with Gaussian pixel noise and random dropout — the labelled pixels a
 camera node's tracker outputs, without rendering images (which `samba node
---synthetic` does). `play` sends those pixels as UDP packets on a wall-clock grid:
+--synthetic` does). `of_take` films any take of poses (a BVH file's), `of_markers` a real
+marker take's markers themselves (`samba.service.marker_motion`), which has no true
+poses. `play` sends those pixels as UDP packets on a wall-clock grid:
 frame i of every camera is captured at `start_at + i / fps`, as free-running
 synchronised cameras would. The demo, the service tests and the service benchmark use
 them in place of real cameras.
@@ -16,29 +18,35 @@ import asyncio
 import socket
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from samba.base import InputError
 from samba.body import Take, markers_of
 from samba.cameras import CameraGroup
 from samba.markers import spread_cameras
+from samba.service.marker_motion import marker_poses
 from samba.service.packet import MarkerPacket, encode
 from samba.synthetic import generate
 
 
 @dataclass(frozen=True, eq=False)
 class SyntheticCapture:
-    """A take seen by calibrated cameras.
+    """Markers seen by calibrated cameras.
 
-    `take` holds the true poses (F, 13, 3) meters at `take.fps`; `cameras` the group
-    (camera id n = `cameras[n]`); `pixels` (c, F, 8, 2) the labelled marker pixels each
-    camera reports, NaN where it misses the marker.
+    `markers` (F, 8, 3) meters, NaN = missing: what the cameras film, at `fps` frames
+    per second; `cameras` the group (camera id n = `cameras[n]`); `pixels` (c, F, 8, 2)
+    the labelled marker pixels each camera reports, NaN where it misses the marker;
+    `take` the true poses (F, 13, 3) meters of a built-in motion or a BVH file, None for
+    a real marker take (its markers are all the truth there is).
     """
 
-    take: Take
+    markers: np.ndarray
+    fps: float
     cameras: CameraGroup
     pixels: np.ndarray
+    take: Take | None = None
 
     @classmethod
     def film(
@@ -70,18 +78,39 @@ class SyntheticCapture:
         seed: int = 0,
     ) -> SyntheticCapture:
         """Film any take (poses in meters, e.g. a BVH file's) as `film` does."""
-        group = CameraGroup(tuple(spread_cameras(take.poses, cameras, size)))
+        markers = markers_of(take.poses.astype(np.float64))
+        capture = cls.of_markers(markers, take.fps, cameras, size, noise_px, dropout, seed)
+        return replace(capture, take=take)
+
+    @classmethod
+    def of_markers(
+        cls,
+        markers: np.ndarray,
+        fps: float,
+        cameras: int = 2,
+        size: tuple[int, int] = (640, 480),
+        noise_px: float = 0.3,
+        dropout: float = 0.0,
+        seed: int = 0,
+    ) -> SyntheticCapture:
+        """Film markers (F, 8, 3) meters at `fps` (NaN: a marker the cameras cannot see)
+        as `film` does, the cameras spread around the frames that hold all 8 markers.
+        `InputError` when no frame does."""
+        complete = ~np.isnan(markers).any(axis=(1, 2))
+        if not complete.any():
+            raise InputError("markers", "no frame holds all 8 markers to place the cameras by")
+        group = CameraGroup(tuple(spread_cameras(marker_poses(markers[complete]), cameras, size)))
         rng = np.random.default_rng([seed, 1])
-        pixels = group.project(markers_of(take.poses.astype(np.float64)))
+        pixels = group.project(markers)
         pixels = pixels + rng.normal(0.0, noise_px, pixels.shape)
         outside = ~np.stack([c.in_image(p) for c, p in zip(group, pixels, strict=True)])
         pixels[outside | (rng.random(pixels.shape[:-1]) < dropout)] = np.nan
-        return cls(take, group, pixels)
+        return cls(markers, float(fps), group, pixels)
 
     @property
     def frames(self) -> int:
         """Number of frames F."""
-        return len(self.take)
+        return len(self.markers)
 
     def packet(
         self, camera: int, frame: int, start_at: float, session: str = "", sequence0: int = 0
@@ -91,7 +120,7 @@ class SyntheticCapture:
         return MarkerPacket(
             camera=camera,
             sequence=(sequence0 + frame) % 2**32,
-            timestamp=start_at + frame / self.take.fps,
+            timestamp=start_at + frame / self.fps,
             markers=self.pixels[camera, frame],
             session=session,
         )
@@ -121,7 +150,7 @@ async def play(
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.setblocking(False)
         for frame in frames:
-            due = start_at + frame / capture.take.fps
+            due = start_at + frame / capture.fps
             delay = due - time.time()
             if delay > 0:
                 await asyncio.sleep(delay)

@@ -13,13 +13,14 @@ feet):
 
 **Calibration** (`calibrate_skin_offsets`), alternating least squares over the c frames
 of the calibration stretch: with the offsets so far, the corrected markers
-`marker - R @ offset` are reconstructed with the marker term loosened to
-`CALIBRATION_MARKER_SIGMA`, so that the pose keeps the database's body geometry rather
-than following the markers; then the offsets that best explain the markers from that
+`marker - R @ offset` are reconstructed by `best`'s configuration (whatever method then
+reconstructs the take: the offsets belong to the subject) with the marker term loosened
+to `CALIBRATION_MARKER_SIGMA`, so that the pose keeps the database's body geometry
+rather than following the markers; then the offsets that best explain the markers from that
 pose are, in the least-squares sense, the mean over frames of `R_f^T (marker_f -
 joint_f)` (each R_f orthonormal), kept to the direction in which each marker sits
-off its joint (`FREE_AXES`). The two steps repeat `iterations` times from zero
-offsets, each over-relaxed by `RELAXATION`.
+off its joint (`FREE_AXES`) and at most `MAX_OFFSET` long. The two steps repeat
+`iterations` times from zero offsets, each over-relaxed by `RELAXATION`.
 
 **Removal** (`SkinMarkerReconstructor`): live, each frame's markers are corrected with
 the segment frames of the pose the previous estimates predict (constant velocity);
@@ -34,6 +35,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from samba.body import MARKER_JOINTS, MARKER_NAMES, N_MARKERS, joint_frames, markers_of
+from samba.reconstruct.methods import BEST
 from samba.reconstruct.neighbours import NeighbourSource
 from samba.reconstruct.reconstruction import (
     PoseEstimate,
@@ -47,6 +49,9 @@ CALIBRATION_MARKER_SIGMA = 0.05
 stays in the database's geometry and the markers' own offsets show as residuals."""
 DEFAULT_ITERATIONS = 8
 """Alternations of the calibration by default."""
+MAX_OFFSET = 0.10
+"""Longest offset (m) the calibration gives a marker: a skin marker sits within a few
+centimetres of its joint (acromion 4-7 cm, epicondyle and malleolus 3-6 cm)."""
 RELAXATION = 1.5
 """Each alternation moves the offsets this many times the step to its least-squares fit
 (over-relaxed: the plain fixed-point step converges slowly, as the loose reconstruction
@@ -129,16 +134,14 @@ def calibrate_skin_offsets(
 ) -> SkinOffsets:
     """A subject's skin offsets from the markers (c, 8, 3), world meters (NaN = missing),
     of a calibration stretch, against `reconstructor`'s database (module docstring),
-    reconstructing with the marker term's sigma `marker_sigma` meters. `reconstructor`
-    itself is not changed. `ValueError` when no frame of the stretch can be
-    reconstructed."""
+    reconstructing by `best`'s configuration with the marker term's sigma
+    `marker_sigma` meters. `reconstructor` itself is not changed. `ValueError` when no
+    frame of the stretch can be reconstructed."""
     markers = np.asarray(markers, dtype=np.float64)
     present = ~np.isnan(markers).any(axis=-1)
     if not reconstructor.usable(present).any():
         raise ValueError("no frame of the calibration stretch has enough markers")
-    loose = Reconstructor(
-        reconstructor.source, replace(reconstructor.config, marker_sigma=marker_sigma)
-    )
+    loose = Reconstructor(reconstructor.source, replace(BEST, marker_sigma=marker_sigma))
     used = present & loose.usable(present)[:, None]
     counts = np.maximum(used.sum(axis=0), 1)[:, None]
     offsets = SkinOffsets.none()
@@ -148,10 +151,16 @@ def calibrate_skin_offsets(
         frames = joint_frames(poses)[:, list(MARKER_JOINTS)]
         local = np.einsum("nmji,nmj->nmi", frames, markers - markers_of(poses))
         mean = np.where(used[..., None], local, 0.0).sum(axis=0) / counts
-        fitted = mean * FREE_AXES
+        fitted = _at_most(mean * FREE_AXES, MAX_OFFSET)
         step = offsets.offsets + RELAXATION * (fitted - offsets.offsets)
         offsets = SkinOffsets(step, len(markers))
     return offsets
+
+
+def _at_most(offsets: np.ndarray, length: float) -> np.ndarray:
+    """Offsets (8, 3) each shortened to at most `length` meters."""
+    norms = np.linalg.norm(offsets, axis=-1, keepdims=True)
+    return offsets * np.minimum(1.0, length / np.maximum(norms, 1e-12))
 
 
 class SkinMarkerReconstructor:

@@ -6,8 +6,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from samba.base import address, positive_float
+from samba.base import InputError, address, positive_float
 from samba.service.demo import DemoSettings, run_demo
+from samba.service.marker_motion import is_marker_file
 from samba.service.vmc import MARIONETTE_PORT
 from samba.synthetic import MOTIONS
 
@@ -20,7 +21,14 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--motion",
         type=_motion,
         default="walk",
-        help=f"built-in motion ({', '.join(MOTIONS)}) or a BVH file to play (default: walk)",
+        help=f"built-in motion ({', '.join(MOTIONS)}), a BVH file, or a C3D file whose real "
+        "markers the cameras film (default: walk)",
+    )
+    parser.add_argument(
+        "--marker-set",
+        metavar="FILE",
+        help="a C3D file's marker set: TOML naming the labels of the 8 markers "
+        "(default: Plug-in-Gait's)",
     )
     parser.add_argument("--seconds", type=positive_float, default=8.0, help="capture length")
     parser.add_argument("--fps", type=positive_float, default=60.0, help="camera frame rate")
@@ -48,12 +56,14 @@ def _motion(value: str) -> str:
     if value in MOTIONS or Path(value).is_file():
         return value
     raise argparse.ArgumentTypeError(
-        f"{value!r} is neither a built-in motion ({', '.join(MOTIONS)}) nor a BVH file"
+        f"{value!r} is neither a built-in motion ({', '.join(MOTIONS)}) nor a BVH or C3D file"
     )
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo in `--out` or a temporary folder; prints what it did."""
+    if args.marker_set is not None and not is_marker_file(args.motion):
+        raise InputError("--marker-set", "applies to a C3D file (--motion FILE.c3d) only")
     settings = DemoSettings(
         motion=args.motion,
         seconds=args.seconds,
@@ -64,5 +74,6 @@ def run(args: argparse.Namespace) -> int:
         open_viewer=args.open,
         seed=args.seed,
         avatar=args.avatar,
+        marker_set=args.marker_set,
     )
     return run_demo(settings)

@@ -1,7 +1,8 @@
 """`samba node`: one camera node of the live service (`samba.service.node`).
 
 Reads frames from exactly one source (a video file, an image folder, a webcam or one
-camera of the synthetic rig), detects and tracks the 8 markers and sends one UDP packet
+camera of the synthetic rig, filming a built-in motion or the real markers of a C3D
+file), detects and tracks the 8 markers and sends one UDP packet
 per frame to the server. With `--mode silhouette` the node is markerless: one ordinary
 camera, the subject's silhouette tracked over the shape tree of `--db`
 (`samba.service.silhouette_node`), one pose packet per frame to a session whose input is
@@ -24,6 +25,8 @@ from samba.body import KINDS, N_MARKERS
 from samba.cameras import read_calibration
 from samba.db import stored_tree
 from samba.db.cli import chosen_body, chosen_home
+from samba.ingest import PLUG_IN_GAIT, MarkerSet
+from samba.service.marker_motion import is_marker_file
 from samba.service.node import DEFAULT_FPS, DEFAULT_PORT, PacketSender, SubjectStart, run_node
 from samba.service.node_sources import (
     DEFAULT_SYNTHETIC_SECONDS,
@@ -41,6 +44,7 @@ _SCOPES: dict[str, tuple[str, ...]] = {
     "seconds": ("synthetic",),
     "seed": ("synthetic",),
     "start_at": ("synthetic",),
+    "marker_set": ("synthetic",),
     "start_x": ("video", "images", "webcam"),
     "start_z": ("video", "images", "webcam"),
     "heading": ("video", "images", "webcam"),
@@ -86,10 +90,11 @@ def register(parser: argparse.ArgumentParser) -> None:
     source.add_argument("--webcam", type=natural, metavar="INDEX", help="an OpenCV camera index")
     source.add_argument(
         "--synthetic",
-        choices=MOTIONS,
+        type=_synthetic_motion,
         metavar="MOTION",
-        help="this camera of the synthetic rig filming a built-in motion after a 1-s "
-        f"standing lead-in: {', '.join(MOTIONS)}",
+        help="this camera of the synthetic rig filming a built-in motion "
+        f"({', '.join(MOTIONS)}) or the real markers of a C3D file (FILE.c3d), after a 1-s "
+        "standing lead-in",
     )
     parser.add_argument(
         "--session",
@@ -137,7 +142,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--seconds",
         type=positive_float,
         metavar="S",
-        help=f"length of the motion (default {DEFAULT_SYNTHETIC_SECONDS:g})",
+        help=f"length of the motion (default {DEFAULT_SYNTHETIC_SECONDS:g}; a C3D file: "
+        "all of it)",
     )
     synthetic.add_argument(
         "--seed", type=natural, metavar="N", help="seed of the motion and noise (default 0)"
@@ -149,6 +155,13 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="UNIX time of frame 0; frame i is captured at T + i / fps (default: now + "
         f"{START_DELAY_SECONDS:g} s). Nodes given the same motion, seed and T film the "
         "same instants",
+    )
+    synthetic.add_argument(
+        "--marker-set",
+        metavar="FILE",
+        help="a C3D file's marker set: TOML naming the labels of the 8 markers "
+        "([markers] l_shoulder = \"LABEL\", ...; default: Plug-in-Gait's LSHO, LWRA/LWRB, "
+        "LKNE, LANK, ...)",
     )
     subject = parser.add_argument_group(
         "subject start (video, images, webcam): where the subject stands in the standard "
@@ -209,6 +222,7 @@ def run(args: argparse.Namespace) -> int:
             f"has {len(cameras)} cameras (ids 0..{len(cameras) - 1}); no camera {args.camera}",
         )
     camera = cameras[args.camera]
+    marker_set = PLUG_IN_GAIT if args.marker_set is None else MarkerSet.from_toml(args.marker_set)
     source = NodeSource(
         kind,
         getattr(args, kind),
@@ -218,6 +232,7 @@ def run(args: argparse.Namespace) -> int:
         seconds=args.seconds,
         seed=args.seed,
         start_at=args.start_at,
+        marker_set=marker_set,
     )
     key = read_key_file(args.key_file) if args.key_file is not None else None
     host, port = args.server
@@ -268,12 +283,26 @@ def _source_of(args: argparse.Namespace) -> str:
             if getattr(args, name) is not None and args.mode != mode:
                 flag = "--" + name.replace("_", "-")
                 raise InputError(flag, f"applies to --mode {mode} only")
+    marker_file = source == "synthetic" and is_marker_file(args.synthetic)
+    if args.marker_set is not None and not marker_file:
+        raise InputError("--marker-set", "applies to a C3D file (--synthetic FILE.c3d) only")
     if args.mode == "silhouette":
+        if marker_file:
+            raise InputError(args.synthetic, "a C3D file plays in --mode markers only")
         if args.db is None:
             raise InputError("--mode silhouette", "needs --db STORE (its shape tree)")
         if source != "synthetic" and (args.background is None) == (args.empty_frames is None):
             raise InputError("--mode silhouette", "give --background PATH or --empty-frames N")
     return source
+
+
+def _synthetic_motion(text: str) -> str:
+    """`--synthetic`: a built-in motion's name or a C3D file's path (read later)."""
+    if text in MOTIONS or is_marker_file(text):
+        return text
+    raise argparse.ArgumentTypeError(
+        f"{text!r} is neither a built-in motion ({', '.join(MOTIONS)}) nor a C3D file (.c3d)"
+    )
 
 
 def _camera_id(text: str) -> int:
