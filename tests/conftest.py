@@ -14,10 +14,20 @@ from store_fixtures import make_take
 from samba.cameras.calibration_file import write_calibration
 from samba.db.store import PoseStore
 from samba.db.synthetic_store import build_synthetic_store
+from samba.ingest import import_paths
 from samba.service.synthetic_capture import SyntheticCapture
 from samba.silhouette.shape_tree import ShapeTree
 
 ROOT = Path(__file__).resolve().parents[1]
+REAL_DATABASE = (
+    "cgspeed_131_01",
+    "cgspeed_131_02",
+    "iclone_002_01",
+    "iclone_007_01",
+    "daz_martial_04",
+    "daz_salsa_10",
+)
+"""The CMU takes (three rigs) of `cmu_store`."""
 
 
 def shared_data_dir() -> Path | None:
@@ -56,6 +66,15 @@ def c3d_dir() -> Path:
             "real C3D data not found: set SAMBA_DATA or put ../shared/data/c3d beside the project"
         )
     return data / "c3d"
+
+
+@pytest.fixture(scope="session")
+def cmu_store(cmu_files: list[Path], tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A pose store of six real CMU takes of three rigs, with their mirror images."""
+    path = tmp_path_factory.mktemp("reconstruct") / "db"
+    store = PoseStore.create(path)
+    import_paths(store, [f for f in cmu_files if f.stem in REAL_DATABASE], mirror=True)
+    return path
 
 
 @pytest.fixture(scope="session")

@@ -11,9 +11,7 @@ import numpy as np
 import pytest
 
 from samba.cli import main
-from samba.db import PoseStore
 from samba.ingest import (
-    import_paths,
     read_bvh,
     read_c3d,
     read_recorded_markers,
@@ -25,23 +23,6 @@ from samba.service.marker_reconstruction import reconstruct_marker_take
 from samba.service.session_indexes import SessionIndexes
 
 UP = np.array([0.0, 1.0, 0.0])
-DATABASE = (
-    "cgspeed_131_01",
-    "cgspeed_131_02",
-    "iclone_002_01",
-    "iclone_007_01",
-    "daz_martial_04",
-    "daz_salsa_10",
-)
-
-
-@pytest.fixture(scope="module")
-def cmu_store(cmu_files: list[Path], tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A pose store of six real CMU takes of three rigs, with their mirror images."""
-    path = tmp_path_factory.mktemp("reconstruct") / "db"
-    store = PoseStore.create(path)
-    import_paths(store, [f for f in cmu_files if f.stem in DATABASE], mirror=True)
-    return path
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
