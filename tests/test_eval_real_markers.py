@@ -52,7 +52,7 @@ def test_eval_with_3d_markers_and_a_bad_c3d(
     train = [str(f) for f in cmu_files if f.name in PICKED]
     test = ["--test", str(c3d_dir / "85_02.c3d"), "--methods", "nn", "--max-frames", "90"]
     assert main(["eval", "--train", *train, *test, "--markers-3d"]) == 0
-    assert "3D markers as recorded" in capsys.readouterr().out
+    assert "markers as recorded (3D)" in capsys.readouterr().out
     broken = tmp_path / "broken.c3d"
     broken.write_bytes(b"\x02\x50" + bytes(600))
     assert main(["eval", "--train", *train, "--test", str(broken)]) == 1

@@ -196,7 +196,7 @@ def marker_report(evaluation: MarkerEvaluation) -> str:
     summaries = evaluation.summaries()
     frames = sum(evaluation.test_frames.values())
     start, stop = evaluation.calibration
-    seen = "3D markers as recorded" if evaluation.markers_3d else "through the evaluation cameras"
+    seen = "as recorded (3D)" if evaluation.markers_3d else "through the evaluation cameras"
     takes = ", ".join(f"{name} ({n} frames)" for name, n in evaluation.test_frames.items())
     lines = [
         f"real marker takes: {takes}; {frames} frames at 30 fps",
