@@ -16,10 +16,11 @@ Frames come from a feed, each frame a `Capture` with its capture time:
 - `WebcamFeed`: an OpenCV camera (timestamp: the clock when the frame is grabbed);
 - `SyntheticFeed`: one camera of the synthetic rig filming a built-in motion
   (`samba.synthetic.motions`) or a C3D file's real markers (`samba.service.marker_motion`)
-  after the standing lead-in (`samba.markers.lead_in`), rendered on the fly (`samba.markers.render`). Its frames are captured on a wall-clock
-  grid, frame i at `start_at + i / fps`, and stamped with exactly that time, so that
-  nodes of the same rig started separately with the same motion, seed and start time
-  film the same subject at the same instants.
+  after the standing lead-in (`samba.markers.lead_in`), rendered on the fly
+  (`samba.markers.render`). Its frames are captured on a wall-clock grid, frame i at
+  `start_at + i / fps`, and stamped with exactly that time, so that nodes of the same rig
+  started separately with the same motion, seed and start time film the same subject at
+  the same instants.
 
 `run_node` drives a `CameraNode` with a feed and a `PacketSender` until the feed ends or
 Ctrl-C, and returns a `NodeSummary`. Timestamps are UNIX seconds (`time.time`).

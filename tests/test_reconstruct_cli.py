@@ -56,6 +56,12 @@ def test_a_c3d_take_becomes_a_take_samba_and_other_tools_read(
     recorded = read_recorded_markers(out)  # the markers recorded beside the poses
     c3d = read_c3d(c3d_dir / "85_02.c3d").resampled(30.0)
     assert np.allclose(recorded.markers[..., [0, 2]], c3d.markers[..., [0, 2]], atol=1e-4)
+    again = tmp_path / "again.bvh"  # a recorded take's markers reconstruct as well
+    code, printed, err = run(
+        capsys, "reconstruct", str(out), "--db", str(cmu_store), "-o", str(again)
+    )
+    assert code == 0, err
+    assert read_bvh(again).n_frames >= 203 and "203 frames at 30 fps" in printed
 
 
 @pytest.mark.parametrize("suffix", [".bvh", ".glb", ".usda"])
@@ -113,6 +119,10 @@ def test_bad_input_gets_one_line_and_writes_nothing(
     text.write_text("not markers")
     code, _, err = run(capsys, "reconstruct", str(text), "--db", str(cmu_store), "-o", str(out))
     assert code == 1 and ".c3d" in err and not out.exists()
+    fake = tmp_path / "fake.mcap"
+    fake.write_bytes(b"\x89MCAP0\r\n" + bytes(100))
+    code, _, err = run(capsys, "reconstruct", str(fake), "--db", str(cmu_store), "-o", str(out))
+    assert code == 1 and err.count("\n") == 1 and str(fake) in err and not out.exists()
     existing = tmp_path / "kept.bvh"
     existing.write_text("keep me")
     code, _, err = run(

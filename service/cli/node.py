@@ -142,8 +142,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--seconds",
         type=positive_float,
         metavar="S",
-        help=f"length of the motion (default {DEFAULT_SYNTHETIC_SECONDS:g}; a C3D file: "
-        "all of it)",
+        help=f"length of the motion (default {DEFAULT_SYNTHETIC_SECONDS:g}; a C3D file: all of it)",
     )
     synthetic.add_argument(
         "--seed", type=natural, metavar="N", help="seed of the motion and noise (default 0)"
@@ -160,7 +159,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--marker-set",
         metavar="FILE",
         help="a C3D file's marker set: TOML naming the labels of the 8 markers "
-        "([markers] l_shoulder = \"LABEL\", ...; default: Plug-in-Gait's LSHO, LWRA/LWRB, "
+        '([markers] l_shoulder = "LABEL", ...; default: Plug-in-Gait\'s LSHO, LWRA/LWRB, '
         "LKNE, LANK, ...)",
     )
     subject = parser.add_argument_group(
