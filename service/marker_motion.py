@@ -42,8 +42,6 @@ from samba.body import (
     N_JOINTS,
     facing_directions,
     markers_of,
-    resample_times,
-    sample_linear,
     standard_pose,
     standing_pose,
 )
@@ -103,7 +101,7 @@ class MarkerMotion:
         8 markers; `InputError` naming `--seconds` when they give no frame."""
         take = read_c3d(path, marker_set)
         centre = np.nanmean(take.markers.reshape(-1, 3), axis=0)
-        markers = sample_linear(take.markers, resample_times(len(take), take.fps, fps))
+        markers = take.resampled(fps).markers
         if seconds is not None:
             markers = markers[: round(seconds * fps)]
             if not len(markers):
