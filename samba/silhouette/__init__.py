@@ -1,11 +1,13 @@
 """Single-camera markerless capture (Okada, Stenger, Kondoh): silhouettes extracted from
-video, silhouettes of the body model rendered for database poses, the shape tree built
+video (background subtraction, or a learnt person segmenter without an empty stage),
+silhouettes of the body model rendered for database poses, the shape tree built
 from them, and the tree-based Bayesian tracker.
 """
 
 from samba.silhouette.distance import downsampled
 from samba.silhouette.evaluation import staged
 from samba.silhouette.extraction import BACKGROUND_METHODS, SilhouetteExtractor
+from samba.silhouette.person_segmentation import PersonSegmenter, SegmenterError
 from samba.silhouette.person_render import person_frames, stage_background
 from samba.silhouette.render import noisy_silhouettes, render_silhouettes
 from samba.silhouette.runs import SilhouetteRuns
@@ -15,6 +17,8 @@ from samba.silhouette.view import SilhouetteView
 
 __all__ = [
     "BACKGROUND_METHODS",
+    "PersonSegmenter",
+    "SegmenterError",
     "ShapeTree",
     "SilhouetteExtractor",
     "SilhouetteRuns",

@@ -346,7 +346,13 @@ class SilhouetteExtractor:
     ) -> SilhouetteExtractor:
         """An extractor (`learn`) for the single-camera tracker whose view is `view_width`
         pixels wide: its closing radius is `tracking_close_px` of the frames' width."""
-        background = learn_background(empty_frames, method, learning_rate)
+        return cls.tracking(learn_background(empty_frames, method, learning_rate), view_width)
+
+    @classmethod
+    def tracking(cls, background: BackgroundModel, view_width: int) -> SilhouetteExtractor:
+        """An extractor over `background` (a learnt background, or a person segmenter) for
+        the single-camera tracker whose view is `view_width` pixels wide: its closing
+        radius is `tracking_close_px` of the frames' width."""
         return cls(background, tracking_close_px(background.size[0], view_width))
 
     def silhouette(self, frame: np.ndarray) -> np.ndarray:

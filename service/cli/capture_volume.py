@@ -4,7 +4,8 @@ calibrated cameras (Chu, Jenkins, Matarić): visual hull, derived skeleton, BVH.
 One video or image folder per camera, in the order of the cameras in the calibration,
 is read in lockstep (the take ends with the shortest). Each camera's empty stage comes
 from `--background` (one video or folder per camera) or from the first
-`--empty-frames` frames of its video. Every frame's silhouettes
+`--empty-frames` frames of its video; footage without an empty stage takes `--segment`
+(a learnt person segmenter, `samba.silhouette.person_segmentation`). Every frame's silhouettes
 (`samba.silhouette.extraction`) are carved into a voxel volume (`samba.volume.visual_hull`);
 the take runs from the first to the last frame with somebody in the volume. The
 volumes give a kinematic model common to the take and its joint angles
@@ -15,6 +16,7 @@ joints (`samba.volume.humanoid`) go to a NumPy archive too.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,7 +27,7 @@ from samba.base import InputError, finite_float, natural, positive, positive_flo
 from samba.cameras import CameraGroup, open_frames, read_calibration, sized_frames
 from samba.export import UNITS
 from samba.service.video_capture import write_volume_capture
-from samba.silhouette import BACKGROUND_METHODS, SilhouetteExtractor
+from samba.silhouette import BACKGROUND_METHODS, PersonSegmenter, SilhouetteExtractor
 from samba.volume import (
     HUMAN_END_BRANCHES,
     MIN_VOXELS,
@@ -65,6 +67,12 @@ def register(parser: argparse.ArgumentParser) -> None:
         type=natural,
         metavar="N",
         help="the first N frames of each VIDEO show the empty stage",
+    )
+    stage.add_argument(
+        "--segment",
+        action="store_true",
+        help="no empty stage: find the person in every frame with a learnt person segmenter "
+        "(MediaPipe Pose; set up once on first use, about 430 MB)",
     )
     parser.add_argument(
         "--method", choices=BACKGROUND_METHODS, default="colour", help="background model"
@@ -135,9 +143,16 @@ def run(args: argparse.Namespace) -> int:
         sized_frames(open_frames(video).frames(), video, camera, args.calib)
         for video, camera in zip(args.videos, cameras, strict=True)
     ]
-    extractors = _extractors(args, streams, cameras)
     hull = VisualHull(grid, cameras)
-    first, volumes, counts = carve_streams(streams, extractors, hull, args.min_views)
+    with contextlib.ExitStack() as workers:
+        if args.segment:
+            extractors = [
+                SilhouetteExtractor(workers.enter_context(PersonSegmenter(video, camera.size)))
+                for video, camera in zip(args.videos, cameras, strict=True)
+            ]
+        else:
+            extractors = _extractors(args, streams, cameras)
+        first, volumes, counts = carve_streams(streams, extractors, hull, args.min_views)
     if not volumes:
         raise InputError(
             ", ".join(args.videos),
