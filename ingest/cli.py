@@ -14,6 +14,17 @@ from samba.ingest.bvh_take import BvhImportOptions
 from samba.ingest.normalize import UNITS, UP_AXES
 from samba.ingest.rigs import BUILTIN_RIGS, RigMap, rig_by_name
 
+MARKER_SET_HELP = (
+    "which labels of a C3D file are the 8 markers: a TOML file ([markers] l_shoulder = "
+    '"LABEL", ...; default: Plug-in-Gait\'s LSHO, LWRA/LWRB, LKNE, LANK, ...)'
+)
+
+
+def add_marker_set_argument(parser: Any) -> None:
+    """Add `--marker-set FILE.toml` (`samba.ingest.MarkerSet.named` reads it) to a parser
+    or argument group."""
+    parser.add_argument("--marker-set", metavar="FILE.toml", help=MARKER_SET_HELP)
+
 
 def add_import_action(sub: Any) -> None:
     """Add `import` to the `samba db` actions `sub`."""

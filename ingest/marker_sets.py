@@ -56,6 +56,11 @@ class MarkerSet:
             return np.stack([np.nanmean(points[:, found], axis=1) for found in columns], axis=1)
 
     @classmethod
+    def named(cls, path: str | Path | None) -> MarkerSet:
+        """The marker set of a `--marker-set` file, or `PLUG_IN_GAIT` for None."""
+        return PLUG_IN_GAIT if path is None else cls.from_toml(path)
+
+    @classmethod
     def from_toml(cls, path: str | Path) -> MarkerSet:
         """Read a marker-set file; `C3dError` naming the file and the problem."""
         name, labels = read_name_map(path, "markers", MARKER_NAMES, "label", C3dError)

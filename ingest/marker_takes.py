@@ -13,13 +13,13 @@ import json
 from pathlib import Path
 
 import numpy as np
-from mcap.records import Channel, Message, Metadata
+from mcap.records import Message
 
 from samba.body import MARKER_NAMES, N_MARKERS
 from samba.ingest.c3d_take import MarkerTake, read_c3d
 from samba.ingest.errors import TakeFileError
 from samba.ingest.marker_sets import PLUG_IN_GAIT, MarkerSet
-from samba.ingest.mcap_take import TAKE_METADATA, RecordStream, on_the_clock
+from samba.ingest.mcap_take import on_the_clock, read_topic
 
 MARKER_TOPIC = "/markers"
 """Topic of the triangulated markers in a recorded take (`foxglove.PointCloud`: x, y, z
@@ -45,42 +45,15 @@ def read_recorded_markers(path: str | Path) -> MarkerTake:
     and recorded in the take `path`, on a regular grid at the take's fps. `TakeFileError`
     naming the file when it cannot be read, is not a take or holds no markers."""
     path = Path(path)
-    source = str(path)
-    try:
-        stream = path.open("rb")
-    except OSError as exc:
-        raise TakeFileError(source, f"cannot read file: {exc.strerror or exc}") from exc
-    meta: dict[str, str] | None = None
-    channels: set[int] = set()
-    frames: list[np.ndarray] = []
-    times: list[int] = []
-    with stream:
-        records = RecordStream(stream, path.stat().st_size)
-        for record in records:
-            if isinstance(record, Metadata) and record.name == TAKE_METADATA:
-                meta = dict(record.metadata)
-            elif isinstance(record, Channel) and record.topic == MARKER_TOPIC:
-                channels.add(record.id)
-            elif isinstance(record, Message) and record.channel_id in channels:
-                frames.append(_markers(record, source, len(frames)))
-                times.append(record.log_time)
-    if records.count == 0:
-        raise TakeFileError(source, f"not an MCAP file ({records.error})")
-    if meta is None:
-        raise TakeFileError(source, "no take metadata: not a take recorded by samba")
-    if not frames:
-        raise TakeFileError(source, f"holds no {MARKER_TOPIC} messages (no recorded markers)")
-    try:
-        fps = float(meta.get("fps", ""))
-    except ValueError:
-        fps = 0.0
-    if not 0 < fps < float("inf"):
-        raise TakeFileError(source, f"take metadata has no valid fps: {meta.get('fps')!r}")
+    recorded = read_topic(path, MARKER_TOPIC, _markers)
+    if not recorded.values:
+        raise TakeFileError(str(path), f"holds no {MARKER_TOPIC} messages (no recorded markers)")
+    frames, times, fps, meta = recorded.values, recorded.times, recorded.fps, recorded.meta
     markers, gaps = on_the_clock(np.stack(frames), np.array(times, dtype=np.int64), fps)
     markers = np.asarray(markers, dtype=np.float64)
     notes = [gaps] if gaps else []
-    if records.error:
-        notes.append(f"file cut short or damaged ({records.error}): read {len(frames)} frames")
+    if recorded.cut:
+        notes.append(f"file cut short or damaged ({recorded.cut}): read {len(frames)} frames")
     return MarkerTake(
         name=meta.get("name") or path.stem,
         points=markers,

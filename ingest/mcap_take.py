@@ -8,7 +8,8 @@ footer (the recorder died before `close`) yields every frame of its complete chu
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
@@ -53,44 +54,16 @@ def read_take(path: str | Path) -> Take:
     """
     path = Path(path)
     source = str(path)
-    try:
-        stream = path.open("rb")
-    except OSError as exc:
-        raise TakeFileError(source, f"cannot read file: {exc.strerror or exc}") from exc
-    meta: dict[str, str] | None = None
-    subject: dict[str, str] = {}
-    pose_channels: set[int] = set()
-    poses: list[np.ndarray] = []
-    times: list[int] = []
-    with stream:
-        records = RecordStream(stream, path.stat().st_size)
-        for record in records:
-            if isinstance(record, Metadata) and record.name == TAKE_METADATA:
-                meta = dict(record.metadata)
-            elif isinstance(record, Metadata) and record.name == SUBJECT_METADATA:
-                subject = dict(record.metadata)
-            elif isinstance(record, Channel) and record.topic == POSE_TOPIC:
-                pose_channels.add(record.id)
-            elif isinstance(record, Message) and record.channel_id in pose_channels:
-                poses.append(_pose(record, source, len(poses)))
-                times.append(record.log_time)
-    cut = records.error
-    if records.count == 0:
-        raise TakeFileError(source, f"not an MCAP file ({cut})")
-    if meta is None:
-        raise TakeFileError(source, "no take metadata: not a take recorded by samba")
-    if not poses:
+    recorded = read_topic(path, POSE_TOPIC, _pose)
+    if not recorded.values:
+        cut = recorded.cut
         raise TakeFileError(
             source, "holds no recorded frame" + (f" (cut short: {cut})" if cut else "")
         )
-    try:
-        fps = float(meta.get("fps", ""))
-    except ValueError:
-        fps = 0.0
-    if not 0 < fps < float("inf"):
-        raise TakeFileError(source, f"take metadata has no valid fps: {meta.get('fps')!r}")
+    poses, times, fps, cut = recorded.values, recorded.times, recorded.fps, recorded.cut
+    meta, subject = recorded.meta, recorded.subject
     warnings = []
-    recorded, gaps = on_the_clock(np.stack(poses), np.array(times, dtype=np.int64), fps)
+    regular, gaps = on_the_clock(np.stack(poses), np.array(times, dtype=np.int64), fps)
     if gaps:
         warnings.append(gaps)
     if cut is not None and _ends_whole(path):
@@ -105,7 +78,7 @@ def read_take(path: str | Path) -> Take:
         )
     return Take(
         name=meta.get("name") or path.stem,
-        poses=recorded,
+        poses=regular,
         source_frames=len(poses),
         fps=fps,
         source=str(path.resolve()),
@@ -113,6 +86,63 @@ def read_take(path: str | Path) -> Take:
         warnings=warnings,
         meta={"start_time": meta.get("start_time", ""), "format": "mcap", **subject},
     )
+
+
+@dataclass(frozen=True)
+class RecordedTopic:
+    """What `read_topic` read of a take: the `take` metadata `meta` (with a valid `fps`),
+    the `subject` metadata (empty without), the decoded messages `values` of the topic
+    with their capture `times` (ns), and `cut`: what stopped the reading early (None
+    after a whole file)."""
+
+    meta: dict[str, str]
+    subject: dict[str, str]
+    values: list[np.ndarray]
+    times: list[int]
+    fps: float
+    cut: str | None
+
+
+def read_topic(
+    path: Path, topic: str, decode: Callable[[Message, str, int], np.ndarray]
+) -> RecordedTopic:
+    """Every message of `topic` in the take recorded in the MCAP file `path`, decoded by
+    `decode(message, source, index)`, read as a stream of records (a file without a
+    footer gives its complete chunks). `TakeFileError` naming the file when it cannot be
+    read, is not MCAP, or has no take metadata with a valid fps."""
+    source = str(path)
+    try:
+        stream = path.open("rb")
+    except OSError as exc:
+        raise TakeFileError(source, f"cannot read file: {exc.strerror or exc}") from exc
+    meta: dict[str, str] | None = None
+    subject: dict[str, str] = {}
+    channels: set[int] = set()
+    values: list[np.ndarray] = []
+    times: list[int] = []
+    with stream:
+        records = _RecordStream(stream, path.stat().st_size)
+        for record in records:
+            if isinstance(record, Metadata) and record.name == TAKE_METADATA:
+                meta = dict(record.metadata)
+            elif isinstance(record, Metadata) and record.name == SUBJECT_METADATA:
+                subject = dict(record.metadata)
+            elif isinstance(record, Channel) and record.topic == topic:
+                channels.add(record.id)
+            elif isinstance(record, Message) and record.channel_id in channels:
+                values.append(decode(record, source, len(values)))
+                times.append(record.log_time)
+    if records.count == 0:
+        raise TakeFileError(source, f"not an MCAP file ({records.error})")
+    if meta is None:
+        raise TakeFileError(source, "no take metadata: not a take recorded by samba")
+    try:
+        fps = float(meta.get("fps", ""))
+    except ValueError:
+        fps = 0.0
+    if not 0 < fps < float("inf"):
+        raise TakeFileError(source, f"take metadata has no valid fps: {meta.get('fps')!r}")
+    return RecordedTopic(meta, subject, values, times, fps, records.error)
 
 
 def on_the_clock(poses: np.ndarray, times_ns: np.ndarray, fps: float) -> tuple[np.ndarray, str]:
@@ -161,7 +191,7 @@ def _ends_whole(path: Path) -> bool:
         return stream.read() == MCAP0_MAGIC
 
 
-class RecordStream:
+class _RecordStream:
     """Iterates the records of an MCAP file of `size` bytes until its end or the first
     undecodable byte. Afterwards `count` is the number of records read and `error`
     describes what stopped the stream early (None after a complete file)."""

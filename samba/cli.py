@@ -54,7 +54,6 @@ from samba.evaluation import (
 from samba.export import avatar_humanoid
 from samba.export import cli as export_cli
 from samba.ingest import (
-    PLUG_IN_GAIT,
     MarkerSet,
     detect_rig,
     expand_paths,
@@ -187,11 +186,7 @@ def _register_eval(parser: argparse.ArgumentParser) -> None:
         metavar="A:B",
         help="seconds of each take the subject's skin offsets are calibrated on (default 0:2)",
     )
-    real.add_argument(
-        "--marker-set",
-        metavar="FILE.toml",
-        help="which labels are the 8 markers (default: Plug-in-Gait names, LSHO, LWRA ...)",
-    )
+    import_cli.add_marker_set_argument(real)
     parser.set_defaults(run=_eval)
 
 
@@ -247,7 +242,7 @@ def _marker_tests(
     files: Sequence[Path], marker_set: str | None, max_frames: int | None
 ) -> list[MarkerTest]:
     """Real marker takes at 30 fps with their reference joint centres."""
-    chosen = MarkerSet.from_toml(marker_set) if marker_set else PLUG_IN_GAIT
+    chosen = MarkerSet.named(marker_set)
     tests = []
     for path in files:
         take = read_c3d(path, chosen).resampled(EVALUATION_FPS)

@@ -31,7 +31,7 @@ import numpy as np
 from samba.cameras import write_calibration
 from samba.db import PoseStore, build_synthetic_store
 from samba.export import Avatar, load_avatar, retarget, write_export
-from samba.ingest import PLUG_IN_GAIT, BvhImportOptions, MarkerSet, load_bvh_take, read_take
+from samba.ingest import BvhImportOptions, MarkerSet, load_bvh_take, read_take
 from samba.service.marker_motion import MarkerMotion, is_marker_file
 from samba.service.serve import LiveServer
 from samba.service.session import CaptureSession
@@ -154,9 +154,7 @@ def _capture(settings: DemoSettings) -> tuple[SyntheticCapture, str]:
     """The motion the camera nodes play and its name: a built-in one (a seed the database
     never saw), a BVH file or a C3D file's real markers, `--seconds` of it."""
     if is_marker_file(settings.motion):
-        marker_set = PLUG_IN_GAIT
-        if settings.marker_set is not None:
-            marker_set = MarkerSet.from_toml(settings.marker_set)
+        marker_set = MarkerSet.named(settings.marker_set)
         motion = MarkerMotion.read(settings.motion, settings.fps, settings.seconds, marker_set)
         capture = SyntheticCapture.of_markers(
             motion.markers, motion.fps, dropout=0.02, seed=settings.seed

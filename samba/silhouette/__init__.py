@@ -7,8 +7,8 @@ from them, and the tree-based Bayesian tracker.
 from samba.silhouette.distance import downsampled
 from samba.silhouette.evaluation import staged
 from samba.silhouette.extraction import BACKGROUND_METHODS, SilhouetteExtractor
-from samba.silhouette.person_segmentation import PersonSegmenter, SegmenterError
 from samba.silhouette.person_render import person_frames, stage_background
+from samba.silhouette.person_segmentation import PersonSegmenter, SegmenterError
 from samba.silhouette.render import noisy_silhouettes, render_silhouettes
 from samba.silhouette.runs import SilhouetteRuns
 from samba.silhouette.shape_tree import ShapeTree, TreeLevel

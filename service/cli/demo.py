@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from samba.base import InputError, address, positive_float
+from samba.ingest.cli import add_marker_set_argument
 from samba.service.demo import DemoSettings, run_demo
 from samba.service.marker_motion import is_marker_file
 from samba.service.vmc import MARIONETTE_PORT
@@ -24,12 +25,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         help=f"built-in motion ({', '.join(MOTIONS)}), a BVH file, or a C3D file whose real "
         "markers the cameras film (default: walk)",
     )
-    parser.add_argument(
-        "--marker-set",
-        metavar="FILE",
-        help="a C3D file's marker set: TOML naming the labels of the 8 markers "
-        "(default: Plug-in-Gait's)",
-    )
+    add_marker_set_argument(parser)
     parser.add_argument("--seconds", type=positive_float, default=8.0, help="capture length")
     parser.add_argument("--fps", type=positive_float, default=60.0, help="camera frame rate")
     parser.add_argument(

@@ -25,7 +25,8 @@ from samba.body import KINDS, N_MARKERS
 from samba.cameras import read_calibration
 from samba.db import stored_tree
 from samba.db.cli import chosen_body, chosen_home
-from samba.ingest import PLUG_IN_GAIT, MarkerSet
+from samba.ingest import MarkerSet
+from samba.ingest.cli import add_marker_set_argument
 from samba.service.marker_motion import is_marker_file
 from samba.service.node import DEFAULT_FPS, DEFAULT_PORT, PacketSender, SubjectStart, run_node
 from samba.service.node_sources import (
@@ -155,13 +156,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         f"{START_DELAY_SECONDS:g} s). Nodes given the same motion, seed and T film the "
         "same instants",
     )
-    synthetic.add_argument(
-        "--marker-set",
-        metavar="FILE",
-        help="a C3D file's marker set: TOML naming the labels of the 8 markers "
-        '([markers] l_shoulder = "LABEL", ...; default: Plug-in-Gait\'s LSHO, LWRA/LWRB, '
-        "LKNE, LANK, ...)",
-    )
+    add_marker_set_argument(synthetic)
     subject = parser.add_argument_group(
         "subject start (video, images, webcam): where the subject stands in the standard "
         "pose when capture begins"
@@ -221,7 +216,7 @@ def run(args: argparse.Namespace) -> int:
             f"has {len(cameras)} cameras (ids 0..{len(cameras) - 1}); no camera {args.camera}",
         )
     camera = cameras[args.camera]
-    marker_set = PLUG_IN_GAIT if args.marker_set is None else MarkerSet.from_toml(args.marker_set)
+    marker_set = MarkerSet.named(args.marker_set)
     source = NodeSource(
         kind,
         getattr(args, kind),

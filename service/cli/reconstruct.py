@@ -10,7 +10,8 @@ from pathlib import Path
 
 from samba.base import InputError, positive_float, seconds_range
 from samba.export import FORMAT_SUFFIXES, format_of, load_avatar
-from samba.ingest import PLUG_IN_GAIT, MarkerSet, read_marker_take
+from samba.ingest import MarkerSet, read_marker_take
+from samba.ingest.cli import add_marker_set_argument
 from samba.reconstruct import METHODS, method
 from samba.service.marker_reconstruction import reconstruct_marker_take, write_reconstruction
 from samba.service.session_indexes import SessionIndexes
@@ -54,11 +55,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="take the markers as joint centres (markers the project placed itself)",
     )
-    parser.add_argument(
-        "--marker-set",
-        metavar="FILE.toml",
-        help="which C3D labels are the 8 markers (default: Plug-in-Gait names, LSHO, LWRA ...)",
-    )
+    add_marker_set_argument(parser)
     parser.add_argument(
         "--avatar", metavar="FILE", help="avatar for BVH / glTF / USD output (default: mannequin)"
     )
@@ -76,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(out), "already exists; outputs are never overwritten")
     if not out.resolve().parent.is_dir():
         raise InputError("--output", f"folder of {out} does not exist")
-    marker_set = MarkerSet.from_toml(args.marker_set) if args.marker_set else PLUG_IN_GAIT
+    marker_set = MarkerSet.named(args.marker_set)
     avatar = load_avatar(args.avatar)
     take = read_marker_take(args.take, marker_set).resampled(args.fps)
     for warning in take.warnings:
