@@ -1,11 +1,16 @@
 """Cameras: the calibrated camera model and camera groups, calibration from board images
-(detection, bundle adjustment, recordings), calibration files of other tools, the frames of
-a camera (image folders, videos), and triangulation.
+(detection, bundle adjustment, recordings), calibration files of other tools and systems
+(anipose, FreeMoCap, Pose2Sim, Qualisys QTM, EasyMocap), the frames of a camera (image
+folders, videos), and triangulation.
 """
 
 from samba.cameras.calibration import WORLDS
 from samba.cameras.calibration_board import BOARD_SPEC_HELP, parse_board
-from samba.cameras.calibration_file import read_calibration, write_calibration
+from samba.cameras.calibration_file import (
+    convert_calibration,
+    read_calibration,
+    write_calibration,
+)
 from samba.cameras.camera import Camera, CameraGroup
 from samba.cameras.frame_io import read_frames, write_video
 from samba.cameras.frame_source import FrameSource, open_frames, open_video, sized_frames
@@ -22,6 +27,7 @@ __all__ = [
     "RecordingCalibration",
     "Triangulation",
     "calibrate_recordings",
+    "convert_calibration",
     "open_frames",
     "open_video",
     "parse_board",

@@ -1,4 +1,5 @@
-"""Calibration files: the TOML layout of anipose (aniposelib), FreeMoCap and Pose2Sim.
+"""Calibration files: ours, the TOML layout of anipose (aniposelib), FreeMoCap and Pose2Sim,
+and the calibrations of other systems read in their place.
 
 The layout, as those tools write it (checked against aniposelib's `CameraGroup.dump` /
 `Camera.get_dict`, a calibration in aniposelib's test data, and Pose2Sim's `toml_write`
@@ -30,13 +31,26 @@ additions, which the other tools ignore). `read_calibration` converts a file to 
 frame from the units and up axis given as arguments, else from its `metadata`, else
 assumes meters and +Y up. Up "+z" is Pose2Sim's convention, converted the way its
 `zup2yup` converts its outputs: our (x, y, z) = the file's (y, z, x).
+
+Other systems' calibrations are read by `read_calibration` too, chosen by the path
+(`calibration_format`), and converted to our world from their own units and up axis
+(the arguments override both):
+
+* Qualisys QTM: a `.qca`, `.qca.txt` or `.xml` file (`samba.cameras.qualisys_file`),
+  millimetres, +Z up (QTM's default lab frame);
+* EasyMocap: a folder holding `intri.yml` and `extri.yml`, or either file with the other
+  beside it (`samba.cameras.easymocap_file`), meters, +Z up (its board frame).
+
+`convert_calibration` writes any of them as ours (`samba calibrate --convert`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import tomllib
 from collections.abc import Callable, Mapping
+from pathlib import Path
 
 import numpy as np
 import tomli_w
@@ -44,6 +58,8 @@ from scipy.spatial.transform import Rotation
 
 from samba.base import InputError, write_text_atomic
 from samba.cameras.camera import Camera, CameraGroup
+from samba.cameras.easymocap_file import EXTRINSICS, INTRINSICS, read_easymocap
+from samba.cameras.qualisys_file import read_qualisys
 
 UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 """Length units a calibration file may use, in meters."""
@@ -63,19 +79,49 @@ MAX_TRANSLATION_M = 10_000.0
 across; a value like 1e308 is a broken file whose projections overflow."""
 
 PathLike = str | os.PathLike[str]
+FOREIGN_FORMATS: dict[str, tuple[Callable[[PathLike], CameraGroup], str, str]] = {
+    "qualisys": (read_qualisys, "mm", "+z"),
+    "easymocap": (read_easymocap, "m", "+z"),
+}
+"""Other systems' calibrations: format -> (reader giving the cameras in the file's own
+units and axes, its units, its up axis)."""
+
+
+def calibration_format(path: PathLike) -> str:
+    """The kind of calibration at `path`, by its name: "easymocap" for a folder or a file
+    named intri.yml / extri.yml, "qualisys" for a .qca, .qca.txt or .xml file, else "toml"
+    (ours, anipose's, FreeMoCap's and Pose2Sim's)."""
+    path = Path(path)
+    name = path.name.lower()
+    if path.is_dir() or name in (INTRINSICS, EXTRINSICS):
+        return "easymocap"
+    if name.endswith((".qca", ".qca.txt", ".xml")):
+        return "qualisys"
+    return "toml"
 
 
 def read_calibration(
     path: PathLike, units: str | None = None, up: str | None = None
 ) -> CameraGroup:
-    """The cameras of a calibration file, in our world frame (meters, +Y up).
+    """The cameras of a calibration, in our world frame (meters, +Y up).
 
-    `units` (a key of `UNITS`) and `up` (a key of `UP_AXES`) say how the file's world is
-    measured; None takes them from its `metadata`, else meters and "+y". InputError
-    naming the file (and the camera table and field) when the file is missing, is not
-    TOML, or a camera table lacks a field or has a malformed one.
+    `path` is any calibration `calibration_format` knows. `units` (a key of `UNITS`) and
+    `up` (a key of `UP_AXES`) say how the file's world is measured; None takes them from
+    a TOML file's `metadata`, else meters and "+y", and for another system's file from its
+    own convention (`FOREIGN_FORMATS`). InputError naming the file (and the camera and
+    field) when the file is missing, is not of its format, or a camera lacks a field or
+    has a malformed one.
     """
     source = str(path)
+    kind = calibration_format(path)
+    if kind in FOREIGN_FORMATS:
+        read, file_units, file_up = FOREIGN_FORMATS[kind]
+        return _reframed(
+            source,
+            read(path),
+            UNITS[_choice(source, "units", units, {}, UNITS, file_units)],
+            UP_AXES[_choice(source, "up", up, {}, UP_AXES, file_up)],
+        )
     try:
         with open(path, "rb") as f:
             document = tomllib.load(f)
@@ -141,6 +187,35 @@ def write_calibration(
     metadata.update(units=units, up=up)
     document[METADATA] = metadata
     write_text_atomic(path, tomli_w.dumps(document))
+
+
+def convert_calibration(
+    source: PathLike, target: PathLike, units: str | None = None, up: str | None = None
+) -> CameraGroup:
+    """Write the calibration `source` (any `read_calibration` reads, `units` and `up` as
+    there) to `target` as ours (meters, +Y up, atomically); returns its cameras."""
+    cameras = read_calibration(source, units, up)
+    write_calibration(target, cameras)
+    return cameras
+
+
+def _reframed(
+    source: str, cameras: CameraGroup, scale: float, to_file: np.ndarray | None
+) -> CameraGroup:
+    """`cameras` of a world measured in units of `scale` meters whose axes `to_file` takes
+    ours to (None: the same axes), in our world; InputError naming `source` for a camera
+    implausibly far from the origin."""
+    moved = []
+    for camera in cameras:
+        translation = camera.translation * scale
+        if np.abs(translation).max() > MAX_TRANSLATION_M:
+            raise InputError(
+                source,
+                f"camera {camera.name!r}: more than {MAX_TRANSLATION_M:g} m from the world origin",
+            )
+        rotation = _turned(camera.rotation, to_file)
+        moved.append(dataclasses.replace(camera, rotation=rotation, translation=translation))
+    return CameraGroup(tuple(moved))
 
 
 def _choice(
