@@ -6,7 +6,8 @@ Single-threaded by construction: BLAS is limited to one thread (threadpoolctl) a
 process pins itself to one core where the OS allows it. The database is the shared CMU
 data (../shared/data or $SAMBA_DATA) without one take, which is observed through the
 EVALUATION.md cameras; without the data, the built-in synthetic motions stand in (and
-the table says so). Every method runs on the same frames in the same run; the `nn`
+the table says so). Every method runs on the same frames in the same run, with the
+compiled kernels and with their numpy references (the same-run baseline); the `nn`
 baseline and the paper's 23.5 ms per frame are printed beside each.
 """
 
@@ -79,32 +80,46 @@ def time_batch(reconstructor: Reconstructor, markers: np.ndarray, repeats: int =
     return len(markers) / best
 
 
-def bench(max_frames: int, methods: list[str]) -> list[list[object]]:
-    """Measure every method; prints and returns the table rows."""
+def bench(
+    max_frames: int, methods: list[str], paths: tuple[str, ...] = ("kernels", "numpy")
+) -> list[list[object]]:
+    """Measure every method on every path ("kernels": the numba kernels; "numpy": their
+    numpy references, `SAMBA_KERNELS=numpy`, the same-run baseline); prints and returns
+    the table rows."""
     label, database, markers = database_and_test(max_frames)
     plain = PoseIndex.build(database)
     mirrored = PoseIndex.build(np.concatenate([database, mirror_poses(database)]))
-    rows: list[list[object]] = []
-    nn_p50 = None
+    measured: dict[tuple[str, str], tuple[float, float, float]] = {}
     for name in methods:
         method = METHODS[name]
         index = mirrored if method.mirrored_database else plain
-        reconstructor = method.build(index)
-        live = time_live(reconstructor, markers)
-        p50, p99 = np.median(live) * 1e3, np.percentile(live, 99) * 1e3
-        nn_p50 = p50 if name == "nn" else nn_p50
+        for path in paths:
+            os.environ["SAMBA_KERNELS"] = "numpy" if path == "numpy" else "numba"
+            reconstructor = method.build(index)
+            live = time_live(reconstructor, markers) * 1e3
+            batch = time_batch(reconstructor, markers)
+            measured[name, path] = (np.median(live), np.percentile(live, 99), batch)
+    os.environ.pop("SAMBA_KERNELS", None)
+    rows: list[list[object]] = []
+    for (name, path), (p50, p99, batch) in measured.items():
+        numpy_p50 = measured.get((name, "numpy"), (None,))[0]
+        speedup = f"{numpy_p50 / p50:.1f}x" if numpy_p50 else "-"
+        nn_p50 = measured.get(("nn", path), (None,))[0]  # nn on the same path
         rows.append(
             [
                 name,
-                f"{len(index)}",
+                path,
+                f"{len(mirrored if METHODS[name].mirrored_database else plain)}",
                 f"{p50:.3f}",
                 f"{p99:.3f}",
+                speedup,
                 f"{p50 / nn_p50:.1f}x" if nn_p50 else "-",
                 f"{PAPER_MS / p50:.0f}x",
-                f"{time_batch(reconstructor, markers):.0f}",
+                f"{batch:.0f}",
             ]
         )
-    header = ["method", "poses", "p50 ms", "p99 ms", "p50 / nn", "paper / p50", "batch f/s"]
+    header = ["method", "path", "poses", "p50 ms", "p99 ms", "numpy / p50", "p50 / nn"]
+    header += ["paper / p50", "batch f/s"]
     print(f"Reconstruction, one core, {len(markers)} frames; {label}")
     print(f"paper: {PAPER_MS} ms per frame (K = 10, N = 10)")
     print_table(None, header, rows)
@@ -116,11 +131,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=2000, help="test frames (default 2000)")
     parser.add_argument("--methods", default="nn,chai,samba,best", help="comma-separated")
+    parser.add_argument(
+        "--paths",
+        default="kernels,numpy",
+        help="comma-separated: kernels (numba), numpy (their references; the baseline)",
+    )
     args = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     with threadpool_limits(limits=1):
-        bench(args.frames, args.methods.split(","))
+        bench(args.frames, args.methods.split(","), tuple(args.paths.split(",")))
 
 
 if __name__ == "__main__":

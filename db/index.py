@@ -35,11 +35,13 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import scipy
 from scipy.spatial import cKDTree
 
+from samba.base import kernels_enabled
 from samba.body import N_MARKERS, align_markers, markers_of
 from samba.db.errors import QueryError, StoreError
 
@@ -118,6 +120,8 @@ class _Tree:
         eps > 0 the tree search is approximate and one batch of candidates is used.
         """
         if scan:
+            if kernels_enabled():
+                return _kernels().scan_kernel(self.features, np.ascontiguousarray(f), k)
             return self._scan(f, k)
         n = len(self.features)
         z = (f - self.mean) @ self.basis
@@ -207,6 +211,8 @@ class PoseIndex:
         self._full = full
         self._masked: OrderedDict[int, _Tree] = OrderedDict()
         self.scan_limit = SCAN_LIMIT
+        if kernels_enabled():
+            _kernels().KERNELS.warm_up()
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -382,3 +388,11 @@ def marker_features(
         aligned, _ = align_markers(markers, scale_by_tibia=scale_by_tibia)
         out[start : start + chunk] = aligned[:, keep].reshape(len(markers), -1)
     return out
+
+
+def _kernels() -> ModuleType:
+    """`samba.db.kernels`, imported on first use: numba's import (0.2 s) stays off
+    commands that never query (`samba --help`)."""
+    import samba.db.kernels as kernels
+
+    return kernels

@@ -1,6 +1,7 @@
 """What every Samba package stands on: the error types a user sees (`SambaError`,
-`InputError`: one line naming the input and the problem), atomic file writes, and the
-command-line argument types the `samba` subcommands share.
+`InputError`: one line naming the input and the problem), atomic file writes, the
+command-line argument types the `samba` subcommands share, and numba kernels compiled once
+per install (`KernelSet`, `compiled`, `kernels_enabled`).
 """
 
 from samba.base.arguments import (
@@ -13,15 +14,19 @@ from samba.base.arguments import (
     seconds_range,
 )
 from samba.base.atomic_file import atomic_path, write_bytes_atomic, write_text_atomic
+from samba.base.compiled_kernels import KernelSet, compiled, kernels_enabled
 from samba.base.errors import InputError, SambaError
 
 __all__ = [
     "InputError",
+    "KernelSet",
     "SambaError",
     "address",
     "atomic_path",
     "bind_address",
+    "compiled",
     "finite_float",
+    "kernels_enabled",
     "natural",
     "positive",
     "positive_float",

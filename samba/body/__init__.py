@@ -4,7 +4,14 @@ line-segment distances, the frame of the segment each joint rides on, and the ca
 model of the markerless modes.
 """
 
-from samba.body.alignment import Alignment, align_markers, has_heading
+from samba.body.alignment import (
+    HEADING_PAIRS,
+    REFERENCE_TIBIA,
+    TIBIA_PAIRS,
+    Alignment,
+    align_markers,
+    has_heading,
+)
 from samba.body.body_model import (
     CAPSULE_NAMES,
     CAPSULE_PARTS,
@@ -51,6 +58,7 @@ __all__ = [
     "BONES",
     "CAPSULE_NAMES",
     "CAPSULE_PARTS",
+    "HEADING_PAIRS",
     "JOINT_INDEX",
     "JOINT_NAMES",
     "KINDS",
@@ -59,7 +67,9 @@ __all__ = [
     "N_JOINTS",
     "N_MARKERS",
     "PART_NAMES",
+    "REFERENCE_TIBIA",
     "SEGMENT_OF",
+    "TIBIA_PAIRS",
     "TORSO_EDGES",
     "UNOBSERVED_JOINTS",
     "Alignment",

@@ -36,6 +36,9 @@ MARKER_COORDS = np.array([3 * j + c for j in MARKER_JOINTS for c in range(3)])
 """Positions of the 24 marker coordinates inside a 39-vector."""
 TRUNCATED = 1e-12
 """Factor that shrinks the variance of components dropped by truncation to nearly zero."""
+ROUNDING_VARIANCE = 1e-12
+"""Variance (m^2; a micrometre's spread) below which a component of a local pose space is
+rounding noise of the float32 database poses, not motion: truncation counts it as zero."""
 
 
 @dataclass(frozen=True)
@@ -80,7 +83,9 @@ class LocalPoseSpace:
             cov[:, diag, diag] += variance_floor
             return cls(mean, cov)
         variances, vectors = np.linalg.eigh(cov)
-        clipped = np.maximum(variances, 0.0)
+        # Variances under ROUNDING_VARIANCE are rounding noise: counted as zero, so that
+        # identical samples keep no component.
+        clipped = np.where(variances > ROUNDING_VARIANCE, variances, 0.0)
         total = np.maximum(clipped.sum(axis=1, keepdims=True), 1e-30)
         # eigh sorts ascending: a component is dropped when the larger ones already
         # explain variance_kept of the total.

@@ -26,12 +26,16 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from types import ModuleType
 
 import numpy as np
 
+from samba.base import kernels_enabled
 from samba.body import N_JOINTS, N_MARKERS, Alignment, has_heading, markers_of, standard_pose
 from samba.reconstruct.local_space import (
     POSE_DIMS,
+    ROUNDING_VARIANCE,
+    TRUNCATED,
     EnergyTerms,
     LocalPoseSpace,
     affine_solution,
@@ -166,6 +170,8 @@ class Reconstructor:
             self.config.k, self.config.n, self.config.noise_deg, self.config.seed
         )
         self._history: list[np.ndarray] = []
+        if kernels_enabled():
+            _kernels().KERNELS.warm_up()
         self.prepare(1)
 
     def prepare(self, most_missing: int = 1) -> int:
@@ -272,7 +278,38 @@ class Reconstructor:
 
     def _solve_batch(self, markers: np.ndarray, has_target: np.ndarray) -> _Solved:
         """Everything but the smoothness target, for usable frames (b, 8, 3); frames
-        without a target (the first of a take) get no smoothness term."""
+        without a target (the first of a take) get no smoothness term. By the compiled
+        kernel (`samba.reconstruct.kernels`) unless `kernels_enabled()` says numpy."""
+        if not kernels_enabled():
+            return self._solve_batch_numpy(markers, has_target)
+        cfg = self.config
+        _, rows = self.source.query(markers, k=cfg.k, eps=cfg.eps)
+        neighbours = np.asarray(self.source.poses[rows.reshape(-1)], dtype=np.float64)
+        settings = np.array(
+            [
+                cfg.variance_kept,
+                cfg.variance_floor,
+                TRUNCATED,
+                ROUNDING_VARIANCE,
+                cfg.alpha,
+                cfg.beta,
+                cfg.beta_missing,
+                cfg.bandwidth,
+                cfg.min_bandwidth,
+            ]
+        )
+        offset, gain, anchor = _kernels().local_solutions_kernel(
+            np.ascontiguousarray(markers),
+            neighbours.reshape(len(markers), cfg.k, N_JOINTS, 3),
+            np.ascontiguousarray(has_target),
+            self.noise.coefficients,
+            bool(self.source.scale_by_tibia),
+            settings,
+        )
+        return _Solved(offset, gain, anchor)
+
+    def _solve_batch_numpy(self, markers: np.ndarray, has_target: np.ndarray) -> _Solved:
+        """`_solve_batch` by numpy: the kernel's reference."""
         alignment, aligned, space, _ = self.local_spaces(markers)
         cfg = self.config
         terms = EnergyTerms(
@@ -398,6 +435,14 @@ def _reconstruct(
     residual = np.sqrt(squared.sum(axis=1) / np.maximum(used, 1)) * usable
     confident = usable & (used >= 6) & (residual <= cfg.confident_residual)
     return Reconstruction(poses, residual, used, confident, ~usable)
+
+
+def _kernels() -> ModuleType:
+    """`samba.reconstruct.kernels`, imported on first use: numba's import (0.2 s) stays off
+    commands that never reconstruct (`samba --help`)."""
+    import samba.reconstruct.kernels as kernels
+
+    return kernels
 
 
 def _checked_markers(markers: np.ndarray) -> np.ndarray:
