@@ -32,6 +32,7 @@ import os
 import tempfile
 import zipfile
 from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -43,9 +44,10 @@ from scipy.spatial import cKDTree
 
 from samba.base import kernels_enabled
 from samba.body import N_MARKERS, align_markers, markers_of
+from samba.db.cells import VoronoiCells
 from samba.db.errors import QueryError, StoreError
 
-FORMAT = 2
+FORMAT = 3
 DEFAULT_DIMS = 14
 LEAF_SIZE = 32
 MAX_MASK_TREES = 64
@@ -67,6 +69,8 @@ exact tree search's; on takes the database does not hold (bench_reconstruction) 
 is 4x lower. bench_db times the scan up to 2 x 10^5 poses."""
 SCAN_CHUNK = 64
 """Queries scanned per matrix product (bounds the (chunk, n) distance block)."""
+THREADED_BATCH = 64
+"""Batches of at least this many queries are split over the cores (compiled kernels)."""
 
 
 @dataclass(frozen=True)
@@ -80,6 +84,15 @@ class _Tree:
     mean: np.ndarray  # (3 * present,)
     basis: np.ndarray  # (3 * present, dims), orthonormal columns
     prebuilt: cKDTree | None = None
+    prebuilt_cells: VoronoiCells | None = None
+
+    @cached_property
+    def cells(self) -> VoronoiCells:
+        """The k-means cells of the features (`samba.db.cells`), built on first use unless
+        prebuilt (the full index's, built with it and saved with the store)."""
+        if self.prebuilt_cells is not None:
+            return self.prebuilt_cells
+        return VoronoiCells.build(self.features)
 
     @cached_property
     def tree(self) -> cKDTree:
@@ -100,7 +113,7 @@ class _Tree:
     @classmethod
     def build(cls, features: np.ndarray, dims: int, prebuild: bool = False) -> _Tree:
         """The table of features (n, D) projected to `dims` principal dimensions, with its
-        tree built now when `prebuild`."""
+        tree and cells built now when `prebuild`."""
         features = np.ascontiguousarray(features, dtype=np.float32)
         mean = features.mean(axis=0, dtype=np.float64)
         centered = features - mean.astype(np.float32)
@@ -108,9 +121,10 @@ class _Tree:
         _, vectors = np.linalg.eigh(cov)
         dims = min(dims, features.shape[1])
         basis = np.ascontiguousarray(vectors[:, ::-1][:, :dims])
-        return cls(
-            features, mean, basis, _reduced_tree(features, mean, basis) if prebuild else None
-        )
+        if not prebuild:
+            return cls(features, mean, basis)
+        tree = _reduced_tree(features, mean, basis)
+        return cls(features, mean, basis, tree, VoronoiCells.build(features))
 
     def query(self, f: np.ndarray, k: int, eps: float, scan: bool) -> tuple[np.ndarray, np.ndarray]:
         """k nearest of features f (b, D): distances (b, k), indices (b, k).
@@ -119,9 +133,9 @@ class _Tree:
         eps == 0 the result is exact (fetching more candidates until certified), with
         eps > 0 the tree search is approximate and one batch of candidates is used.
         """
+        if kernels_enabled():
+            return self._compiled_query(np.ascontiguousarray(f, dtype=np.float64), k, eps, scan)
         if scan:
-            if kernels_enabled():
-                return _kernels().scan_kernel(self.features, np.ascontiguousarray(f), k)
             return self._scan(f, k)
         n = len(self.features)
         z = (f - self.mean) @ self.basis
@@ -135,6 +149,41 @@ class _Tree:
             dist[unsure], idx[unsure] = d, i
             unsure = unsure[d[:, -1] > b]
         return dist, idx
+
+    def _compiled_query(
+        self, f: np.ndarray, k: int, eps: float, scan: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`query` by the compiled kernels: the scan, or the cells (`eps` as the tree's);
+        batches of `THREADED_BATCH` or more queries are split over the cores (the kernels
+        release the GIL)."""
+        kernels = _kernels()
+        if scan:
+
+            def search(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                return kernels.scan_kernel(self.features, part, k)
+
+        else:
+            cells = self.cells
+
+            def search(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                d, i = kernels.cells_kernel(
+                    cells.features,
+                    cells.starts,
+                    cells.centroids,
+                    cells.between,
+                    cells.radii,
+                    part,
+                    k,
+                    float(eps),
+                )
+                return d, cells.rows[i]
+
+        workers = os.cpu_count() or 1
+        if len(f) < THREADED_BATCH or workers == 1:
+            return search(f)
+        with ThreadPoolExecutor(workers) as pool:
+            parts = list(pool.map(search, np.array_split(f, workers)))
+        return np.concatenate([d for d, _ in parts]), np.concatenate([i for _, i in parts])
 
     def _rerank(
         self, z: np.ndarray, f32: np.ndarray, k: int, fetch: int, eps: float
@@ -268,7 +317,7 @@ class PoseIndex:
         aligned, _ = align_markers(markers, scale_by_tibia=self.scale_by_tibia)
         if present.all():
             f = aligned.reshape(len(markers), -1)
-            dist, idx = self._full.query(f, k, eps, self._scans(eps))
+            dist, idx = self._full.query(f, k, eps, self._scans(eps, self._full))
             return (dist[0], idx[0]) if single else (dist, idx)
         if not present.any(axis=1).all():
             raise QueryError("markers", "an observation has no marker present")
@@ -280,11 +329,17 @@ class PoseIndex:
             keep = present[rows[0]]
             f = aligned[rows][:, keep].reshape(len(rows), -1)
             tree = self._tree(int(mask), keep)
-            dist[rows], idx[rows] = tree.query(f, k, eps, self._scans(eps))
+            dist[rows], idx[rows] = tree.query(f, k, eps, self._scans(eps, tree))
         return (dist[0], idx[0]) if single else (dist, idx)
 
-    def _scans(self, eps: float) -> bool:
-        """Whether queries with this eps scan the table rather than search the tree."""
+    def _scans(self, eps: float, table: _Tree) -> bool:
+        """Whether a query of `table` with this eps scans it. With the compiled kernels a
+        table whose cells are prebuilt (the full one) is searched by them, any other of
+        at most `scan_limit` poses scanned (exact, whatever the eps: cheaper than building
+        its cells); by numpy, exact queries of small tables scan and the rest search the
+        tree."""
+        if kernels_enabled():
+            return table.prebuilt_cells is None and len(self) <= self.scan_limit
         return eps == 0 and len(self) <= self.scan_limit
 
     def _tree(self, mask: int, keep: np.ndarray) -> _Tree:
@@ -317,6 +372,7 @@ class PoseIndex:
             "mean": full.mean,
             "basis": full.basis,
             "tree_state": np.array(len(state)),
+            **full.cells.arrays("cells_"),
         }
         for i, item in enumerate(state):
             if item is not None:
@@ -350,7 +406,8 @@ class PoseIndex:
                 )
                 tree = cKDTree.__new__(cKDTree)
                 tree.__setstate__(state)
-                full = _Tree(features, data["mean"], data["basis"], prebuilt=tree)
+                cells = VoronoiCells.from_arrays(features, data, "cells_")
+                full = _Tree(features, data["mean"], data["basis"], tree, cells)
                 return cls(
                     poses,
                     full,

@@ -54,10 +54,96 @@ def scan_kernel(features: np.ndarray, queries: np.ndarray, k: int) -> tuple[np.n
     return distances, indices
 
 
+@compiled(reassociate=True)
+def cells_kernel(
+    features: np.ndarray,
+    starts: np.ndarray,
+    centroids: np.ndarray,
+    between: np.ndarray,
+    radii: np.ndarray,
+    queries: np.ndarray,
+    k: int,
+    eps: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The k nearest of `features` (n, D) float32, stored cell by cell (cell c holds rows
+    starts[c]:starts[c + 1]), to each of `queries` (b, D), distances as `scan_kernel`
+    computes them: (distances (b, k) meters, rows (b, k) int64 in the stored order).
+
+    Cells are visited in order of a lower bound of the distance of any of their rows and
+    the search stops when the next bound times (1 + `eps`) is no less than the k-th
+    distance found: exact with eps = 0; otherwise each distance returned is at most
+    (1 + eps) times the true one (the k-d tree's meaning of eps). The bound of cell c is
+    the larger of |q - centroid_c| - radii[c] (every row lies within radii[c] of its
+    centroid) and the distance from q to the bisector of c and q's nearest centroid,
+    (|q - c|^2 - |q - nearest|^2) / (2 between[nearest, c]), `between` (cells, cells)
+    the centroids' distances (every row lies in its nearest centroid's cell).
+    """
+    b = queries.shape[0]
+    n_cells, d = centroids.shape
+    distances = np.empty((b, k))
+    indices = np.empty((b, k), dtype=np.int64)
+    best = np.empty(k)
+    rows = np.empty(k, dtype=np.int64)
+    squared = np.empty(n_cells)
+    bound = np.empty(n_cells)
+    for q in range(b):
+        query = queries[q].astype(np.float32)
+        for c in range(n_cells):
+            total = 0.0
+            for j in range(d):
+                diff = centroids[c, j] - query[j]
+                total += diff * diff
+            squared[c] = total
+        nearest = np.argmin(squared)
+        for c in range(n_cells):
+            bound[c] = max(np.sqrt(squared[c]) - radii[c], 0.0)
+            if c != nearest:
+                gap = (squared[c] - squared[nearest]) / (2.0 * between[nearest, c])
+                bound[c] = max(bound[c], gap)
+        order = np.argsort(bound)
+        best[:] = np.inf
+        rows[:] = -1
+        worst = np.inf
+        slack = (1.0 + eps) ** 2
+        for visit in range(n_cells):
+            c = order[visit]
+            if bound[c] * bound[c] * slack >= worst:
+                break
+            for i in range(starts[c], starts[c + 1]):
+                total = 0.0
+                for j in range(d):
+                    diff = np.float64(features[i, j] - query[j])
+                    total += diff * diff
+                if total < worst:
+                    p = k - 1
+                    while p > 0 and best[p - 1] > total:
+                        best[p] = best[p - 1]
+                        rows[p] = rows[p - 1]
+                        p -= 1
+                    best[p] = total
+                    rows[p] = i
+                    worst = best[k - 1]
+        distances[q] = np.sqrt(best)
+        indices[q] = rows
+    return distances, indices
+
+
 def _example_scan() -> tuple[np.ndarray, np.ndarray]:
     """Compile `scan_kernel` for the index's argument types."""
     return scan_kernel(np.zeros((4, 24), dtype=np.float32), np.zeros((1, 24)), 2)
 
 
-KERNELS = KernelSet("pose index", (scan_kernel,), (_example_scan,), estimate_s=2.0)
-"""The index's kernels, warmed with every `PoseIndex` that scans."""
+def _example_cells() -> tuple[np.ndarray, np.ndarray]:
+    """Compile `cells_kernel` for the index's argument types."""
+    features = np.zeros((4, 24), dtype=np.float32)
+    starts = np.array([0, 2, 4])
+    centroids = np.zeros((2, 24))
+    return cells_kernel(
+        features, starts, centroids, np.ones((2, 2)), np.zeros(2), np.zeros((1, 24)), 2, 0.0
+    )
+
+
+KERNELS = KernelSet(
+    "pose index", (scan_kernel, cells_kernel), (_example_scan, _example_cells), estimate_s=4.0
+)
+"""The index's kernels, warmed with every `PoseIndex`."""

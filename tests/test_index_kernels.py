@@ -50,3 +50,23 @@ def test_scan_kernel_agrees_with_numpy_and_brute_force(
     finally:
         index.scan_limit = len(index)
     np.testing.assert_allclose(distances, tree_distances, rtol=1e-12)
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.5])
+def test_cells_are_exact_and_eps_bounds_the_error(index: PoseIndex, eps: float) -> None:
+    # Masked tables too are searched by their cells once larger than the scan limit.
+    rng = np.random.default_rng(11)
+    markers = index.poses[rng.integers(0, len(index), 60)][:, [1, 2, 5, 6, 9, 10, 11, 12]]
+    markers = markers + rng.normal(0.0, 0.03, markers.shape)
+    markers[::2, 4] = np.nan
+    truth, _ = index.query(markers, k=10)  # the full table's cells and the masked scan
+    index.scan_limit = 0
+    try:
+        found, _ = index.query(markers, k=10, eps=eps)
+    finally:
+        index.scan_limit = len(index)
+    if eps == 0:
+        np.testing.assert_allclose(found, truth, rtol=1e-12)
+    else:
+        assert np.all(found <= truth * (1 + eps) + 1e-12)
+        assert np.mean(np.isclose(found, truth, rtol=1e-12)) > 0.9
