@@ -61,8 +61,13 @@ class VoronoiCells:
             min_points_per_centroid=1,
             verbose=False,
         )
-        kmeans.train(features)
-        _, assigned = kmeans.index.search(features, 1)
+        threads = faiss.omp_get_max_threads()
+        faiss.omp_set_num_threads(1)  # OpenMP's spinning threads cost 2-10x on a busy machine
+        try:
+            kmeans.train(features)
+            _, assigned = kmeans.index.search(features, 1)
+        finally:
+            faiss.omp_set_num_threads(threads)
         centroids = kmeans.centroids.astype(np.float64)
         between = cdist(centroids, centroids)
         return cls._of(features, assigned.ravel(), count, between, centroids)

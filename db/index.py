@@ -62,11 +62,12 @@ EXACT_FETCH = 2
 """Exact queries first fetch this many times k candidates (more when not certified)."""
 APPROXIMATE_FETCH = 4
 """Approximate queries fetch this many times k candidates and re-rank them."""
-SCAN_LIMIT = 100_000
-"""Largest table an exact query scans rather than searching the tree. bench_db, single
-queries at 10^4 to 10^5 poses: the scan's p50 is 1.3-2x and its p99 2-9x lower than the
-exact tree search's; on takes the database does not hold (bench_reconstruction) its p50
-is 4x lower. bench_db times the scan up to 2 x 10^5 poses."""
+SCAN_LIMIT = 20_000
+"""Largest table a query scans rather than searching its cells (compiled kernels; any
+eps) or its tree (numpy; exact queries). bench_db, single queries, 2026-12-05: numpy's
+scan ties the exact tree at 10^4 poses and takes 1.7x its time at 3 x 10^4; the compiled
+scan takes 53 us at 1.6 x 10^4 poses, the cells 55-83 us at 3 x 10^4 (without the 0.06 s
+their k-means costs a masked table once)."""
 SCAN_CHUNK = 64
 """Queries scanned per matrix product (bounds the (chunk, n) distance block)."""
 THREADED_BATCH = 64

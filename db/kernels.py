@@ -144,6 +144,6 @@ def _example_cells() -> tuple[np.ndarray, np.ndarray]:
 
 
 KERNELS = KernelSet(
-    "pose index", (scan_kernel, cells_kernel), (_example_scan, _example_cells), estimate_s=4.0
+    "pose index", (scan_kernel, cells_kernel), (_example_scan, _example_cells), estimate_s=5.0
 )
 """The index's kernels, warmed with every `PoseIndex`."""

@@ -412,5 +412,5 @@ def _example() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     )
 
 
-KERNELS = KernelSet("reconstruction", (local_solutions_kernel,), (_example,), estimate_s=15.0)
+KERNELS = KernelSet("reconstruction", (local_solutions_kernel,), (_example,), estimate_s=20.0)
 """The reconstruction's kernels, warmed by every `Reconstructor` (`KernelSet.warm_up`)."""
