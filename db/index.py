@@ -42,7 +42,7 @@ import numpy as np
 import scipy
 from scipy.spatial import cKDTree
 
-from samba.base import kernels_enabled
+from samba.base import kernels_enabled, usable_cores
 from samba.body import N_MARKERS, align_markers, markers_of
 from samba.db.cells import VoronoiCells
 from samba.db.errors import QueryError, StoreError
@@ -179,7 +179,7 @@ class _Tree:
                 )
                 return d, cells.rows[i]
 
-        workers = os.cpu_count() or 1
+        workers = usable_cores()
         if len(f) < THREADED_BATCH or workers == 1:
             return search(f)
         with ThreadPoolExecutor(workers) as pool:

@@ -52,7 +52,7 @@ def test_reconstruction_benchmark_prints_its_table(capsys: pytest.CaptureFixture
         ["best", "kernels"],
         ["best", "numpy"],
     ]
-    assert all(float(r[3]) > 0 and float(r[8]) > 0 for r in rows)
+    assert all(float(r[3]) > 0 and float(r[8]) > 0 and float(r[9]) > 0 for r in rows)
 
 
 bench_cameras = _bench("bench_cameras")

@@ -14,7 +14,7 @@ from samba.base.arguments import (
     seconds_range,
 )
 from samba.base.atomic_file import atomic_path, write_bytes_atomic, write_text_atomic
-from samba.base.compiled_kernels import KernelSet, compiled, kernels_enabled
+from samba.base.compiled_kernels import KernelSet, compiled, kernels_enabled, usable_cores
 from samba.base.errors import InputError, SambaError
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "positive",
     "positive_float",
     "seconds_range",
+    "usable_cores",
     "write_bytes_atomic",
     "write_text_atomic",
 ]

@@ -32,6 +32,14 @@ def kernels_enabled() -> bool:
     return NUMBA_AVAILABLE and os.environ.get("SAMBA_KERNELS", "numba") != "numpy"
 
 
+def usable_cores() -> int:
+    """The CPU cores this process may run on (its affinity where the OS has one): how many
+    threads a batch of compiled-kernel work is split over."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
 def compiled(function: Callable | None = None, *, reassociate: bool = False) -> Callable:
     """`function` as a numba kernel (`@njit(cache=True, nogil=True)`, numpy's error model:
     a division by zero gives inf or NaN as in its numpy reference, not an exception);

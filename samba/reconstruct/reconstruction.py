@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from types import ModuleType
 
 import numpy as np
 
-from samba.base import kernels_enabled
+from samba.base import kernels_enabled, usable_cores
 from samba.body import N_JOINTS, N_MARKERS, Alignment, has_heading, markers_of, standard_pose
 from samba.reconstruct.local_space import (
     POSE_DIMS,
@@ -45,6 +46,9 @@ from samba.reconstruct.local_space import (
 from samba.reconstruct.neighbours import NeighbourSource
 from samba.reconstruct.part_retrieval import refine_with_parts
 from samba.reconstruct.pseudo_poses import AngleNoise, pseudo_poses
+
+THREADED_FRAMES = 64
+"""Batches of at least this many frames are solved on every core the process may use."""
 
 
 @dataclass(frozen=True)
@@ -298,15 +302,27 @@ class Reconstructor:
                 cfg.min_bandwidth,
             ]
         )
-        offset, gain, anchor = _kernels().local_solutions_kernel(
-            np.ascontiguousarray(markers),
-            neighbours.reshape(len(markers), cfg.k, N_JOINTS, 3),
-            np.ascontiguousarray(has_target),
-            self.noise.coefficients,
-            bool(self.source.scale_by_tibia),
-            settings,
-        )
-        return _Solved(offset, gain, anchor)
+        neighbours = neighbours.reshape(len(markers), cfg.k, N_JOINTS, 3)
+        markers = np.ascontiguousarray(markers)
+        has_target = np.ascontiguousarray(has_target)
+
+        def solve(frames: slice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            return _kernels().local_solutions_kernel(
+                markers[frames],
+                neighbours[frames],
+                has_target[frames],
+                self.noise.coefficients,
+                bool(self.source.scale_by_tibia),
+                settings,
+            )
+
+        workers = usable_cores()
+        if len(markers) < THREADED_FRAMES or workers == 1:
+            return _Solved(*solve(slice(None)))
+        bounds = np.linspace(0, len(markers), workers + 1).astype(int)
+        with ThreadPoolExecutor(workers) as pool:  # the kernel releases the GIL
+            parts = list(pool.map(solve, [slice(a, b) for a, b in itertools.pairwise(bounds)]))
+        return _Solved(*(np.concatenate(arrays) for arrays in zip(*parts, strict=True)))
 
     def _solve_batch_numpy(self, markers: np.ndarray, has_target: np.ndarray) -> _Solved:
         """`_solve_batch` by numpy: the kernel's reference."""
