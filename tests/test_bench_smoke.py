@@ -144,3 +144,13 @@ def test_leave_and_return_report_finds_the_subject_only_with_the_search(
     (found, baseline) = rows
     assert float(found[5]) < 40.0 and float(baseline[5]) == 100.0  # lost after return %
     assert found[7] == baseline[7]  # swaps
+
+
+bench_startup = _bench("bench_startup")
+
+
+def test_startup_benchmark_prints_its_table(capsys: pytest.CaptureFixture[str]) -> None:
+    rows = bench_startup.bench(compile_first=False, repeats=1)
+    assert "baseline: numpy path" in capsys.readouterr().out
+    assert [r[0] for r in rows][-1].startswith("import, index")
+    assert all(float(t) > 0 for r in rows for t in r[1].split(" / "))
