@@ -6,8 +6,11 @@
 alignment of both into the canonical frame (`samba.body.Alignment`), the pseudo-poses
 (`pseudo_poses`), the samples' kernel weights (`Reconstructor.sample_weights`), the local
 pose space (`LocalPoseSpace.from_samples`), the energy's affine minimiser
-(`affine_solution`) and its turn back to the world frame. `tests/test_reconstruct_kernels.py`
-checks that both give the same poses (1e-9 m).
+(`affine_solution`) and its turn back to the world frame. `part_estimates_kernel` does
+the same for `part_retrieval.part_estimate` after its index query (the neighbours aligned
+by the part's markers, their kernel-weighted mean, turned back). The numpy functions stay
+the references; `tests/test_reconstruct_kernels.py` checks that both paths give the same
+poses (1e-9 m).
 
 The reconstruction takes the kernel unless `samba.base.kernels_enabled()` says no
 (`SAMBA_KERNELS=numpy`, for debugging, or no numba on the platform). Numba compiles it on
@@ -180,6 +183,50 @@ def _apply(points: np.ndarray, origin: np.ndarray, turn: np.ndarray, out: np.nda
 
 
 @compiled
+def part_estimates_kernel(
+    markers: np.ndarray, neighbours: np.ndarray, distances: np.ndarray, scale_by_tibia: bool
+) -> np.ndarray:
+    """`part_retrieval.part_estimate` after its query: poses (b, 13, 3) world meters, the
+    kernel-weighted mean of the neighbours (b, K, 13, 3) world meters at feature distances
+    (b, K), each aligned by the markers (b, 8, 3) present (NaN = missing), turned back by
+    the observation's alignment."""
+    b, k = neighbours.shape[0], neighbours.shape[1]
+    out = np.empty((b, N_JOINTS, 3))
+    present = np.empty(N_MARKERS, dtype=np.bool_)
+    origin = np.empty(3)
+    turn = np.empty(4)
+    aligned = np.empty((N_JOINTS, 3))
+    mean = np.empty((N_JOINTS, 3))
+    for f in range(b):
+        for i in range(N_MARKERS):
+            present[i] = not np.isnan(markers[f, i, 0] + markers[f, i, 1] + markers[f, i, 2])
+        nearest = max(distances[f, 0], 1e-3)
+        total = 0.0
+        mean[:] = 0.0
+        for j in range(k):
+            weight = np.exp(-((distances[f, j] / nearest) ** 2))
+            total += weight
+            _alignment(neighbours[f, j][_MARKER_JOINTS], present, scale_by_tibia, origin, turn)
+            _apply(neighbours[f, j], origin, turn, aligned)
+            mean += weight * aligned
+        mean /= total
+        _alignment(markers[f], present, scale_by_tibia, origin, turn)
+        _invert(mean, origin, turn, out[f])
+    return out
+
+
+@compiled
+def _invert(points: np.ndarray, origin: np.ndarray, turn: np.ndarray, out: np.ndarray) -> None:
+    """`Alignment.invert`: canonical points (p, 3) back to `out` (p, 3) in the world."""
+    c, s, inverse = turn[0] * turn[3], turn[1] * turn[3], turn[3]
+    for i in range(points.shape[0]):
+        x, y, z = points[i, 0], points[i, 1], points[i, 2]
+        out[i, 0] = (c * x - s * z) * inverse + origin[0]
+        out[i, 1] = y * inverse + origin[1]
+        out[i, 2] = (s * x + c * z) * inverse + origin[2]
+
+
+@compiled
 def _to_world(
     origin: np.ndarray,
     turn: np.ndarray,
@@ -191,12 +238,9 @@ def _to_world(
     """The canonical minimiser offset (39,) and gain (39, 39, in place) in the world frame
     of the alignment (`origin`, `turn`): world_offset = `Alignment.invert(offset)` and
     gain R^T gain R per joint block, anchor (39,) the origin per joint."""
-    c, s, inverse = turn[0] * turn[3], turn[1] * turn[3], turn[3]
+    c, s = turn[0] * turn[3], turn[1] * turn[3]
+    _invert(offset.reshape(N_JOINTS, 3), origin, turn, world_offset.reshape(N_JOINTS, 3))
     for j in range(N_JOINTS):
-        x, y, z = offset[3 * j], offset[3 * j + 1], offset[3 * j + 2]
-        world_offset[3 * j] = (c * x - s * z) * inverse + origin[0]
-        world_offset[3 * j + 1] = y * inverse + origin[1]
-        world_offset[3 * j + 2] = (s * x + c * z) * inverse + origin[2]
         anchor[3 * j : 3 * j + 3] = origin
     # R = [[c, 0, s], [0, 1, 0], [-s, 0, c]] takes world to canonical directions.
     for row in range(_DIMS):  # columns: gain R
@@ -412,5 +456,18 @@ def _example() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     )
 
 
-KERNELS = KernelSet("reconstruction", (local_solutions_kernel,), (_example,), estimate_s=20.0)
+def _example_parts() -> np.ndarray:
+    """Compile `part_estimates_kernel` for the reconstruction's argument types."""
+    pose = standard_pose()
+    markers = np.ascontiguousarray(pose[list(MARKER_JOINTS)][None])
+    neighbours = np.ascontiguousarray(np.repeat(pose[None, None], 2, axis=1))
+    return part_estimates_kernel(markers, neighbours, np.zeros((1, 2)), False)
+
+
+KERNELS = KernelSet(
+    "reconstruction",
+    (local_solutions_kernel, part_estimates_kernel),
+    (_example, _example_parts),
+    estimate_s=20.0,
+)
 """The reconstruction's kernels, warmed by every `Reconstructor` (`KernelSet.warm_up`)."""

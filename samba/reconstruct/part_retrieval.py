@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from samba.base import kernels_enabled
 from samba.body import N_JOINTS, N_MARKERS, Alignment, has_heading, markers_of
 from samba.reconstruct.neighbours import NeighbourSource
 
@@ -79,11 +80,20 @@ def part_estimate(
     markers (b, 8, 3) over the markers present, each aligned by those markers.
 
     The weight of a neighbour at feature distance d is exp(-(d / d1)^2), d1 the nearest
-    one's distance (at least 1 mm): close matches count, far ones fade.
+    one's distance (at least 1 mm): close matches count, far ones fade. After the query,
+    by the compiled kernel (`samba.reconstruct.kernels.part_estimates_kernel`) unless
+    `kernels_enabled()` says numpy.
     """
     scale = source.scale_by_tibia
     distances, rows = source.query(markers, k=k, eps=eps)
     poses = np.asarray(source.poses[rows.reshape(-1)], dtype=np.float64)
+    if kernels_enabled():
+        import samba.reconstruct.kernels as kernels  # numba only when a kernel runs
+
+        neighbours = poses.reshape(len(markers), k, N_JOINTS, 3)
+        return kernels.part_estimates_kernel(
+            np.ascontiguousarray(markers), neighbours, distances, bool(scale)
+        )
     seen = markers_of(poses.reshape(len(markers), k, N_JOINTS, 3))
     seen = np.where(np.isnan(markers)[:, None], np.nan, seen).reshape(-1, N_MARKERS, 3)
     aligned = Alignment.from_markers(seen, scale_by_tibia=scale).apply(poses)
