@@ -4,7 +4,7 @@ Foreign file formats are `samba.ingest`'s business.
 """
 
 from samba.db.errors import QueryError, StoreCorruptedError, StoreError
-from samba.db.index import PoseIndex
+from samba.db.index import PoseIndex, index_kernels
 from samba.db.shape_tree_file import read_shape_tree, stored_tree, tree_path, write_shape_tree
 from samba.db.store import AddResult, PoseStore, VerifyReport
 from samba.db.synthetic_store import build_synthetic_store
@@ -18,6 +18,7 @@ __all__ = [
     "StoreError",
     "VerifyReport",
     "build_synthetic_store",
+    "index_kernels",
     "read_shape_tree",
     "stored_tree",
     "tree_path",

@@ -42,7 +42,7 @@ import numpy as np
 import scipy
 from scipy.spatial import cKDTree
 
-from samba.base import kernels_enabled, usable_cores
+from samba.base import KernelSet, kernels_enabled, usable_cores
 from samba.body import N_MARKERS, align_markers, markers_of
 from samba.db.cells import VoronoiCells
 from samba.db.errors import QueryError, StoreError
@@ -454,3 +454,9 @@ def _kernels() -> ModuleType:
     import samba.db.kernels as kernels
 
     return kernels
+
+
+def index_kernels() -> KernelSet:
+    """The pose index's compiled kernels (`samba.db.kernels.KERNELS`), for `samba warmup`;
+    importing them imports numba."""
+    return _kernels().KERNELS

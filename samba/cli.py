@@ -25,6 +25,7 @@ from threadpoolctl import threadpool_limits
 from samba.base import (
     InputError,
     SambaError,
+    kernels_enabled,
     natural,
     positive,
     seconds_range,
@@ -37,7 +38,7 @@ from samba.cameras import (
     parse_board,
     write_calibration,
 )
-from samba.db import PoseIndex
+from samba.db import PoseIndex, index_kernels
 from samba.db import cli as store_cli
 from samba.evaluation import (
     EVALUATION_FPS,
@@ -65,7 +66,7 @@ from samba.ingest import (
     rig_of,
 )
 from samba.ingest import cli as import_cli
-from samba.reconstruct import METHODS, method
+from samba.reconstruct import METHODS, method, reconstruction_kernels
 from samba.service.cli import capture_volume, demo, node, reconstruct, serve, track_video
 
 
@@ -371,6 +372,23 @@ def _calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _register_warmup(parser: argparse.ArgumentParser) -> None:
+    """`samba warmup`: compile (the first run after an install) or load every compiled
+    kernel now, ahead of a live session."""
+    parser.set_defaults(run=_warmup)
+
+
+def _warmup(args: argparse.Namespace) -> int:
+    if not kernels_enabled():
+        print("compiled kernels are off (SAMBA_KERNELS=numpy, or numba is not installed)")
+        return 0
+    for kernels in (reconstruction_kernels(), index_kernels()):
+        cached = kernels.is_cached()
+        seconds = kernels.warm_up(sys.stdout)
+        print(f"{kernels.name} kernels {'loaded' if cached else 'compiled'} in {seconds:.1f} s")
+    return 0
+
+
 AREAS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], str]] = {
     "db": (
         _register_db,
@@ -402,6 +420,10 @@ AREAS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], str]] = {
     "capture-volume": (
         capture_volume.register,
         "model-free capture from several cameras: visual hull, derived skeleton, BVH",
+    ),
+    "warmup": (
+        _register_warmup,
+        "compile (first run after an install) or load the compiled kernels ahead of a session",
     ),
 }
 """Subcommand -> (the function that adds its arguments, one-line help)."""

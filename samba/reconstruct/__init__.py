@@ -11,6 +11,7 @@ from samba.reconstruct.reconstruction import (
     ReconstructionConfig,
     Reconstructor,
     reconstruct_together,
+    reconstruction_kernels,
 )
 from samba.reconstruct.skin_offsets import (
     SkinMarkerReconstructor,
@@ -30,4 +31,5 @@ __all__ = [
     "calibrate_skin_offsets",
     "method",
     "reconstruct_together",
+    "reconstruction_kernels",
 ]

@@ -31,7 +31,7 @@ from types import ModuleType
 
 import numpy as np
 
-from samba.base import kernels_enabled, usable_cores
+from samba.base import KernelSet, kernels_enabled, usable_cores
 from samba.body import N_JOINTS, N_MARKERS, Alignment, has_heading, markers_of, standard_pose
 from samba.reconstruct.local_space import (
     POSE_DIMS,
@@ -459,6 +459,12 @@ def _kernels() -> ModuleType:
     import samba.reconstruct.kernels as kernels
 
     return kernels
+
+
+def reconstruction_kernels() -> KernelSet:
+    """The reconstruction's compiled kernels (`samba.reconstruct.kernels.KERNELS`), for
+    `samba warmup`; importing them imports numba."""
+    return _kernels().KERNELS
 
 
 def _checked_markers(markers: np.ndarray) -> np.ndarray:
