@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 from threadpoolctl import threadpool_limits
+from tqdm import tqdm
 
 from samba.base import (
     InputError,
@@ -34,7 +35,10 @@ from samba.base import (
 from samba.cameras import (
     BOARD_SPEC_HELP,
     WORLDS,
+    calibrate_lens_recording,
     calibrate_recordings,
+    camera_table,
+    convert_calibration,
     parse_board,
     write_calibration,
 )
@@ -310,21 +314,41 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _register_calibrate(parser: argparse.ArgumentParser) -> None:
-    """`samba calibrate`: cameras from their recordings of a board (`samba.cameras`)."""
+    """`samba calibrate`: cameras from their recordings of a board, one camera's lens
+    alone (--intrinsics-only), or another calibration converted (--convert)
+    (`samba.cameras`)."""
     parser.add_argument(
         "sources",
-        nargs="+",
+        nargs="*",
         metavar="IMAGES_OR_VIDEO",
         help="one per camera: a folder of images (frames in file-name order) or a video file",
     )
-    parser.add_argument("--board", required=True, metavar="SPEC", help=BOARD_SPEC_HELP)
     parser.add_argument(
-        "-o", "--output", required=True, metavar="CALIB.toml", help="calibration file to write"
+        "--board", metavar="SPEC", help=f"the board (required unless --convert): {BOARD_SPEC_HELP}"
+    )
+    parser.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="CALIB.toml",
+        help="calibration file to write (never overwritten)",
+    )
+    parser.add_argument(
+        "--intrinsics-only",
+        action="store_true",
+        help="one camera's lens alone (focal lengths, principal point, distortion) from "
+        "its photos or video, e.g. a phone or webcam; the camera is written at the origin",
+    )
+    parser.add_argument(
+        "--convert",
+        metavar="IN",
+        help="write the calibration IN (our TOML, anipose / Pose2Sim / FreeMoCap TOML, "
+        "Qualisys .qca / .qca.txt, an EasyMocap folder with intri.yml and extri.yml) as "
+        "ours, meters and +Y up; takes no images and no --board",
     )
     parser.add_argument(
         "--world",
         choices=WORLDS,
-        default="board",
         help="board: the board lies face up on the floor in --floor-frame, which becomes "
         "y = 0 with the origin at its first corner; camera0: the first camera at the "
         "origin looking along -Z (default board)",
@@ -349,27 +373,88 @@ def _register_calibrate(parser: argparse.ArgumentParser) -> None:
         help="also refine focal lengths, principal points and distortion in the joint "
         "adjustment (slower; helps when each camera saw the board in few images)",
     )
+    parser.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="print per image which detector found the board, or why none did",
+    )
     parser.set_defaults(run=_calibrate)
 
 
 def _calibrate(args: argparse.Namespace) -> int:
-    board = parse_board(args.board)
     output = Path(args.output)
     if not output.resolve().parent.is_dir():
         raise InputError("--output", f"folder of {output} does not exist")
-    calibration = calibrate_recordings(
-        args.sources,
-        board,
-        world=args.world,
-        floor_frame=args.floor_frame,
-        every=args.every,
-        refine_intrinsics=args.refine_intrinsics,
-    )
+    _check_calibrate_flags(args)
+    if output.exists():
+        raise InputError(str(output), "already exists; calibration files are never overwritten")
+    if args.convert:
+        cameras = convert_calibration(args.convert, output)
+        print("\n".join(camera_table(cameras)))
+        print(f"wrote {output} from {args.convert}")
+        return 0
+    board = parse_board(args.board)
+    log = tqdm.write if args.verbose else None
+    if args.intrinsics_only:
+        calibration = calibrate_lens_recording(args.sources[0], board, args.every, log)
+    else:
+        calibration = calibrate_recordings(
+            args.sources,
+            board,
+            world=args.world or "board",
+            floor_frame=args.floor_frame,
+            every=args.every,
+            refine_intrinsics=args.refine_intrinsics,
+            log=log,
+        )
     print(calibration.report())
     result = calibration.result
     write_calibration(output, result.cameras, error_px=float(np.mean(result.rms_px)))
     print(f"wrote {output}")
     return 0
+
+
+def _check_calibrate_flags(args: argparse.Namespace) -> None:
+    """InputError naming the flag for a combination `samba calibrate` cannot run."""
+    if args.convert:
+        if args.sources:
+            raise InputError(
+                "--convert", f"takes no images or videos (got {' '.join(args.sources)})"
+            )
+        given = {
+            "--board": args.board is not None,
+            "--intrinsics-only": args.intrinsics_only,
+            "--world": args.world is not None,
+            "--floor-frame": args.floor_frame is not None,
+            "--every": args.every != 1,
+            "--refine-intrinsics": args.refine_intrinsics,
+        }
+        for flag, present in given.items():
+            if present:
+                raise InputError(flag, "does not apply to --convert")
+        return
+    if not args.sources:
+        raise InputError(
+            "IMAGES_OR_VIDEO", "give a folder of images or a video per camera, or --convert IN"
+        )
+    if args.board is None:
+        raise InputError("--board", "required to calibrate from images or videos")
+    if args.intrinsics_only:
+        if len(args.sources) > 1:
+            raise InputError(
+                "--intrinsics-only",
+                f"takes one camera's images or video, got {len(args.sources)}: "
+                f"{' '.join(args.sources)}",
+            )
+        given = {
+            "--world": args.world is not None,
+            "--floor-frame": args.floor_frame is not None,
+            "--refine-intrinsics": args.refine_intrinsics,
+        }
+        for flag, present in given.items():
+            if present:
+                raise InputError(flag, "does not apply to --intrinsics-only (no world, one camera)")
 
 
 def _register_warmup(parser: argparse.ArgumentParser) -> None:
@@ -398,7 +483,10 @@ AREAS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], str]] = {
         _register_eval,
         "accuracy and speed of every reconstruction method on BVH and real marker (C3D) takes",
     ),
-    "calibrate": (_register_calibrate, "calibrate cameras from images or videos of a board"),
+    "calibrate": (
+        _register_calibrate,
+        "calibrate cameras (or one lens) from images or videos of a board; convert calibrations",
+    ),
     "reconstruct": (
         reconstruct.register,
         "reconstruct a marker take (C3D, or recorded by samba serve) into a 13-joint take",

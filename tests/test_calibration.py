@@ -148,7 +148,8 @@ def test_charuco_board(scene: Scene) -> None:
         truth = camera.project(board.object_points[view.ids] @ rotation.T + translation)
         assert np.abs(view.pixels - truth).max() < 0.5
         views.append(view)
-    matrix, _, rms = calibrate_intrinsics(board, views, camera.size)
+    lens = calibrate_intrinsics(board, views, camera.size)
+    matrix, rms = lens.matrix, lens.rms_px
     focal_error = np.abs(matrix[[0, 1], [0, 1]] / camera.matrix[[0, 1], [0, 1]] - 1)
     assert focal_error.max() < 0.01 and rms < 0.5
     blank = np.full((480, 640), 128, np.uint8)

@@ -14,7 +14,12 @@ from samba.cameras.calibration_file import (
 from samba.cameras.camera import Camera, CameraGroup
 from samba.cameras.frame_io import read_frames, write_video
 from samba.cameras.frame_source import FrameSource, open_frames, open_video, sized_frames
-from samba.cameras.recordings import RecordingCalibration, calibrate_recordings
+from samba.cameras.recordings import (
+    RecordingCalibration,
+    calibrate_lens_recording,
+    calibrate_recordings,
+    camera_table,
+)
 from samba.cameras.synthetic_cameras import with_size
 from samba.cameras.triangulation import Triangulation, triangulate, triangulate_cameras
 
@@ -26,7 +31,9 @@ __all__ = [
     "FrameSource",
     "RecordingCalibration",
     "Triangulation",
+    "calibrate_lens_recording",
     "calibrate_recordings",
+    "camera_table",
     "convert_calibration",
     "open_frames",
     "open_video",

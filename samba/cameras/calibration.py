@@ -4,7 +4,8 @@
 number -> `BoardView`; frame n of every camera is the same instant) and:
 
 1. calibrates each camera's intrinsics on its own (`calibrate_intrinsics`: OpenCV's
-   `calibrateCamera`, distortion k1, k2, p1, p2 with k3 = 0);
+   `calibrateCamera`, distortion k1, k2, p1, p2 with k3 = 0), dropping the images whose
+   reprojection error is an outlier (below) from this and every later step;
 2. finds the board's pose in every view (`solvePnP`) and chains the cameras' relative
    poses through a camera graph: starting from the first camera, each camera joins
    through the already placed camera with which it shares the most frames, its pose
@@ -20,7 +21,18 @@ number -> `BoardView`; frame n of every camera is the same instant) and:
    image's up along +Y (the board then only sets the scale).
 
 The result reports each camera's RMS reprojection error (pixels) over the corners the
-refinement used.
+refinement used, and each camera's `Intrinsics` with the error of every image.
+
+Outlier images: after the first `calibrateCamera`, an image whose RMS reprojection error
+exceeds max(`OUTLIER_FACTOR` x the median over the camera's images, the median +
+`OUTLIER_MARGIN_PX`) is dropped and the lens solved again without it, worst first and
+never below `MIN_VIEWS` images (one pass). The median is robust to the outliers
+themselves; the margin keeps a camera whose images all fit within a fraction of a pixel
+from losing good images to a ratio of small numbers (on sharp images the median is
+0.05-0.3 px, and a wrongly numbered or misplaced corner costs its image pixels).
+
+`calibrate_lens` calibrates one camera's intrinsics alone (`samba calibrate
+--intrinsics-only`): the camera sits at the origin with rotation and translation zero.
 """
 
 from __future__ import annotations
@@ -45,6 +57,11 @@ MAX_INTRINSIC_VIEWS = 40
 """Views (evenly spread over the frames) `calibrate_intrinsics` uses at most."""
 MAX_FRAMES = 120
 """Frames (evenly spread, the floor frame always among them) the joint refinement uses."""
+OUTLIER_FACTOR = 3.0
+"""An image is an outlier above this many times the median per-image error (module
+docstring) ..."""
+OUTLIER_MARGIN_PX = 1.0
+"""... and above the median plus this many pixels."""
 
 Pose = tuple[np.ndarray, np.ndarray]
 """A rigid transform (R (3, 3), t (3,)) taking x to R @ x + t."""
@@ -55,39 +72,110 @@ _CAMERA0_TO_WORLD = np.diag([1.0, -1.0, -1.0])
 
 
 @dataclass(frozen=True)
+class Intrinsics:
+    """One camera's lens as `calibrate_intrinsics` solved it: `matrix` (3, 3) and
+    `distortion` (5,) (k1, k2, p1, p2, k3 = 0), the RMS reprojection error `rms_px` of
+    the final solve, pixels; `view_rms_px` each image's RMS error in the first solve
+    (image key -> pixels, for the images solved with), `dropped` the keys of the images
+    dropped as outliers (worst first) and `limit_px` the error above which an image is an
+    outlier (module docstring)."""
+
+    matrix: np.ndarray
+    distortion: np.ndarray
+    rms_px: float
+    view_rms_px: dict[int, float]
+    dropped: tuple[int, ...]
+    limit_px: float
+
+    @property
+    def used(self) -> list[int]:
+        """The keys of the images of the final solve, ascending."""
+        return [key for key in self.view_rms_px if key not in self.dropped]
+
+
+@dataclass(frozen=True)
 class CalibrationResult:
     """What `calibrate` found: the calibrated `cameras`, each camera's RMS reprojection
     error `rms_px` (c,) in pixels and the number of frames `views` (c,) in which the
     refinement used its view of the board; `world` and `floor_frame` say how the world
-    frame was set (`floor_frame` None for world "camera0")."""
+    frame was set (`floor_frame` None for world "camera0"; `world` None for one camera's
+    lens alone, `calibrate_lens`); `intrinsics` (c) each camera's lens solve, its images
+    keyed by frame number."""
 
     cameras: CameraGroup
     rms_px: np.ndarray
     views: np.ndarray
-    world: str
+    world: str | None
     floor_frame: int | None
+    intrinsics: tuple[Intrinsics, ...] = ()
 
 
 def calibrate_intrinsics(
-    board: Board, views: Sequence[BoardView], size: tuple[int, int], name: str = "camera"
-) -> tuple[np.ndarray, np.ndarray, float]:
-    """(matrix (3, 3), distortion (5,), RMS reprojection error in pixels) of one camera
-    of image `size` (width, height) from its views of the board.
+    board: Board,
+    views: Mapping[int, BoardView] | Sequence[BoardView],
+    size: tuple[int, int],
+    name: str = "camera",
+) -> Intrinsics:
+    """One camera's lens, of image `size` (width, height) pixels, from its views of the
+    board: frame number -> view, or a sequence (keyed 0, 1, ... in order).
 
     Uses at most `MAX_INTRINSIC_VIEWS` views, evenly spread; the distortion is k1, k2,
-    p1, p2 with k3 = 0. InputError naming the camera with fewer than `MIN_VIEWS` views.
+    p1, p2 with k3 = 0. Outlier images are dropped and the lens solved again (module
+    docstring). InputError naming the camera with fewer than `MIN_VIEWS` views.
     """
-    if len(views) < MIN_VIEWS:
+    keyed = dict(views) if isinstance(views, Mapping) else dict(enumerate(views))
+    if len(keyed) < MIN_VIEWS:
         raise InputError(
-            name, f"the board was found in {len(views)} image(s); calibration needs {MIN_VIEWS}"
+            name, f"the board was found in {len(keyed)} image(s); calibration needs {MIN_VIEWS}"
         )
-    views = _evenly(list(views), MAX_INTRINSIC_VIEWS)
+    keys = _evenly(sorted(keyed), MAX_INTRINSIC_VIEWS)
+    rms, matrix, distortion, errors = _solve_lens(board, [keyed[k] for k in keys], size)
+    median = float(np.median(errors))
+    limit = max(OUTLIER_FACTOR * median, median + OUTLIER_MARGIN_PX)
+    worst_first = sorted(range(len(keys)), key=lambda i: -errors[i])
+    dropped = [keys[i] for i in worst_first if errors[i] > limit][: len(keys) - MIN_VIEWS]
+    if dropped:
+        kept = [keyed[k] for k in keys if k not in dropped]
+        rms, matrix, distortion, _ = _solve_lens(board, kept, size)
+    return Intrinsics(
+        matrix=matrix,
+        distortion=distortion,
+        rms_px=rms,
+        view_rms_px={k: float(e) for k, e in zip(keys, errors, strict=True)},
+        dropped=tuple(dropped),
+        limit_px=limit,
+    )
+
+
+def _solve_lens(
+    board: Board, views: Sequence[BoardView], size: tuple[int, int]
+) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """OpenCV's `calibrateCamera` on the views: (RMS error px, matrix (3, 3), distortion
+    (5,), each view's RMS error (v,) px)."""
     objects = [board.object_points[v.ids].astype(np.float32) for v in views]
     images = [v.pixels.astype(np.float32).reshape(-1, 1, 2) for v in views]
-    rms, matrix, distortion, _, _ = cv2.calibrateCamera(
+    rms, matrix, distortion, _, _, _, _, errors = cv2.calibrateCameraExtended(
         objects, images, tuple(size), None, None, flags=cv2.CALIB_FIX_K3
     )
-    return matrix, distortion.ravel()[:5], float(rms)
+    return float(rms), matrix, distortion.ravel()[:5], errors.ravel()
+
+
+def calibrate_lens(
+    board: Board, views: Mapping[int, BoardView], size: tuple[int, int], name: str
+) -> CalibrationResult:
+    """One camera's intrinsics alone (`calibrate_intrinsics`), as a result whose camera
+    `name` of image `size` (width, height) sits at the origin with rotation and
+    translation zero; `world` is None and `rms_px` the lens solve's error."""
+    lens = calibrate_intrinsics(board, views, size, name)
+    camera = Camera(name, size, lens.matrix, np.zeros(3), np.zeros(3), lens.distortion)
+    return CalibrationResult(
+        cameras=CameraGroup((camera,)),
+        rms_px=np.array([lens.rms_px]),
+        views=np.array([len(lens.used)]),
+        world=None,
+        floor_frame=None,
+        intrinsics=(lens,),
+    )
 
 
 def calibrate(
@@ -102,19 +190,24 @@ def calibrate(
     """Calibrate c cameras from `detections` (per camera: frame -> its view of the board).
 
     `sizes` are the cameras' image sizes (width, height), `names` their unique names. See
-    the module docstring for the steps and the world frame. InputError (naming the
-    camera) when a camera saw the board in fewer than `MIN_VIEWS` frames or never in a
-    frame together with the cameras already placed, and (naming the frame) when no
-    camera sees the board in `floor_frame`.
+    the module docstring for the steps, the world frame and the images dropped as
+    outliers. InputError (naming the camera) when a camera saw the board in fewer than
+    `MIN_VIEWS` frames or never in a frame together with the cameras already placed, and
+    (naming the frame) when no camera sees the board in `floor_frame`.
     """
     if world not in WORLDS:
         raise ValueError(f"world must be one of {', '.join(WORLDS)}, got {world!r}")
     if not len(detections) == len(sizes) == len(names) >= 1:
         raise ValueError("detections, sizes and names need one entry per camera (at least one)")
-    cameras = []
+    cameras, lenses = [], []
     for views, size, name in zip(detections, sizes, names, strict=True):
-        matrix, distortion, _ = calibrate_intrinsics(board, list(views.values()), size, name)
-        cameras.append(Camera(name, size, matrix, np.zeros(3), np.zeros(3), distortion))
+        lens = calibrate_intrinsics(board, views, size, name)
+        cameras.append(Camera(name, size, lens.matrix, np.zeros(3), np.zeros(3), lens.distortion))
+        lenses.append(lens)
+    detections = [  # without the images dropped as outliers
+        {frame: view for frame, view in views.items() if frame not in lens.dropped}
+        for views, lens in zip(detections, lenses, strict=True)
+    ]
     seen = sorted(set().union(*(views.keys() for views in detections)))
     if world == "board":
         floor_frame = seen[0] if floor_frame is None else floor_frame
@@ -152,6 +245,7 @@ def calibrate(
         views=np.array([len(np.unique(observations.view[u])) for u in used]),
         world=world,
         floor_frame=floor_frame,
+        intrinsics=tuple(lenses),
     )
 
 

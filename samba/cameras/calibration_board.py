@@ -15,11 +15,16 @@ square diagonally outside corner 0 is black and the one outside the last corner 
 and `Board.detect` numbers the corners so that corner 0 is next to the black outer
 square in every view and every camera.
 
-Detection: a checkerboard with `cv2.findChessboardCornersSB`, a ChArUco board with
-`cv2.aruco.CharucoDetector`; the corners are then refined with `cv2.cornerSubPix` in a
+Detection (`Board.find`) tries OpenCV's detectors in order of accuracy until one finds a
+board that passes the checks: for a checkerboard "sb", "sb-exhaustive" and "classic"
+(`samba.cameras.checkerboard_detectors`), for a ChArUco board "charuco"
+(`cv2.aruco.CharucoDetector`, which accepts a partial board: at least
+`MIN_CHARUCO_CORNERS` corners). The corners are refined with `cv2.cornerSubPix` in a
 window scaled to the corner spacing (kept inside the white margin around ChArUco
-markers). On the rendered boards of the tests they land within about 0.05 px (RMS) of
-the truth.
+markers), then refused unless they are a plausible projective image of the board
+(`samba.cameras.corner_grid`), so that no detector's wrong grid reaches a solve. The
+`Detection` says which detector found the board, or why none did. On the rendered
+boards of the tests the corners land within about 0.05 px (RMS) of the truth.
 """
 
 from __future__ import annotations
@@ -32,6 +37,8 @@ import numpy as np
 from scipy.spatial.distance import pdist
 
 from samba.base import InputError
+from samba.cameras.checkerboard_detectors import CHECKERBOARD_DETECTORS, checkerboard_corners
+from samba.cameras.corner_grid import grid_problem
 
 KINDS = ("checkerboard", "charuco")
 """The board kinds `parse_board` accepts."""
@@ -43,16 +50,46 @@ BOARD_SPEC_HELP = (
 """What a `--board` spec looks like."""
 MIN_CHARUCO_CORNERS = 6
 """ChArUco corners a view needs to count as a detection."""
+MIN_ORIENTATION_VOTE = 0.5
+"""Net share of neighbouring inner squares that must agree on which way round a
+checkerboard is (1: all of them; 0.5: three in four)."""
+NOT_FOUND = "no board found"
+"""What a detector that found nothing reports."""
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3)
 
 
 @dataclass(frozen=True)
 class BoardView:
     """The corners of a board found in one image: `ids` (k,) int corner ids, ascending,
-    and `pixels` (k, 2) their sub-pixel image positions (OpenCV pixel convention)."""
+    `pixels` (k, 2) their sub-pixel image positions (OpenCV pixel convention), and the
+    `detector` that found them ("" when not known)."""
 
     ids: np.ndarray
     pixels: np.ndarray
+    detector: str = ""
+
+
+@dataclass(frozen=True)
+class Detection:
+    """What looking for a board in one image came to: its `view` (None when no detector
+    found it) and the `attempts`, in order: (detector, "" when it found the board, else
+    why not, e.g. "no board found" or "rejected: ...")."""
+
+    view: BoardView | None
+    attempts: tuple[tuple[str, str], ...]
+
+    @property
+    def summary(self) -> str:
+        """One line: the detector that found the board, or why none did, with the grids
+        refused on the way, e.g. "classic (sb-exhaustive rejected: corner grid not a
+        projective image of the board (max 218.5 px off a homography; 26.9 px allowed))"."""
+        refused = [(name, why) for name, why in self.attempts if why and why != NOT_FOUND]
+        if self.view is not None:
+            notes = "; ".join(f"{name} {why}" for name, why in refused)
+            return self.view.detector + (f" ({notes})" if notes else "")
+        if not refused:
+            return NOT_FOUND
+        return "; ".join(f"{why} ({name})" for name, why in refused)
 
 
 @dataclass(frozen=True)
@@ -167,59 +204,89 @@ class Board:
         return image, to_pixels
 
     def detect(self, image: np.ndarray) -> BoardView | None:
-        """The board's corners in a grey (h, w) or BGR (h, w, 3) uint8 image, or None.
+        """The board's corners in a grey (h, w) or BGR (h, w, 3) uint8 image, or None
+        (`find` says why)."""
+        return self.find(image).view
+
+    def find(self, image: np.ndarray) -> Detection:
+        """Look for the board in a grey (h, w) or BGR (h, w, 3) uint8 image: its view, and
+        which detector found it or why none did (module docstring).
 
         A checkerboard counts only when all its corners are found, numbered as the module
         docstring says; a ChArUco board when at least `MIN_CHARUCO_CORNERS` corners not
-        all on one line are found.
+        all on one line are found (a partial board: the markers identify the corners).
+        Either is refused when its corners fail the plausibility check of
+        `samba.cameras.corner_grid`.
         """
         grey = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
-        if self.kind == "checkerboard":
-            return self._detect_checkerboard(grey)
-        return self._detect_charuco(grey)
+        if self.kind == "charuco":
+            view, problem = self._charuco_view(grey)
+            return Detection(view, (("charuco", problem),))
+        attempts = []
+        for detector in CHECKERBOARD_DETECTORS:
+            view, problem = self._checkerboard_view(grey, detector)
+            attempts.append((detector, problem))
+            if view is not None:
+                return Detection(view, tuple(attempts))
+        return Detection(None, tuple(attempts))
 
-    def _detect_checkerboard(self, grey: np.ndarray) -> BoardView | None:
-        found, corners = cv2.findChessboardCornersSB(grey, self.corner_grid)
-        if not found:
-            return None
-        pixels = self._oriented(grey, _refined(grey, corners.reshape(-1, 2), 1.0 / 3.0))
+    def _checkerboard_view(self, grey: np.ndarray, detector: str) -> tuple[BoardView | None, str]:
+        """The checkerboard `detector` finds, refined, checked and numbered, or None and
+        why not."""
+        corners = checkerboard_corners(grey, self.corner_grid, detector)
+        if corners is None:
+            return None, NOT_FOUND
+        ids = np.arange(len(corners))
+        pixels = _refined(grey, corners, 1.0 / 3.0)
+        problem = grid_problem(self.object_points[:, :2], ids, pixels, self.corner_grid[0])
+        if problem:
+            return None, f"rejected: {problem}"
+        pixels, problem = self._oriented(grey, pixels)
         if pixels is None:
-            return None
-        return BoardView(ids=np.arange(len(pixels)), pixels=pixels)
+            return None, f"rejected: {problem}"
+        return BoardView(ids=ids, pixels=pixels, detector=detector), ""
 
-    def _oriented(self, grey: np.ndarray, pixels: np.ndarray) -> np.ndarray | None:
+    def _oriented(self, grey: np.ndarray, pixels: np.ndarray) -> tuple[np.ndarray | None, str]:
         """Checkerboard corners (n, 2) reordered to the board's numbering (module
-        docstring), or None when the outer squares cannot be told apart."""
+        docstring), or None and why when the squares' colours do not tell its sides apart.
+
+        Seen from its printed face, the grid runs clockwise in the image (x along a row,
+        then y down); a half turn is told from the colours of its inner squares: the one
+        between corners (i, j) and (i + 1, j + 1) is black when i + j is even. Each pair of
+        neighbouring squares votes by which is darker; at least `MIN_ORIENTATION_VOTE` of
+        the votes (net) must agree.
+        """
         columns, rows = self.corner_grid
         grid = pixels.reshape(rows, columns, 2)
         along, down = grid[0, 1] - grid[0, 0], grid[1, 0] - grid[0, 0]
         if along[0] * down[1] - along[1] * down[0] < 0:  # seen mirrored: x runs backwards
             grid = grid[:, ::-1]
-        homography, _ = cv2.findHomography(self.object_points[:, :2], grid.reshape(-1, 2))
-        if homography is None:
-            return None
-        outside = self.square * np.array([[-0.5, -0.5], [columns - 0.5, rows - 0.5]])
-        ends = cv2.perspectiveTransform(outside[None], homography)[0]
-        first, last = (_mean_around(grey, point) for point in ends)
-        if first is None or last is None or abs(first - last) < 20.0:
-            return None
-        if first > last:  # corner 0 is next to the white outer square: a half turn
+        vote = _colour_vote(grey, grid)
+        if not abs(vote) >= MIN_ORIENTATION_VOTE:
+            return None, "the squares' colours do not say which way round the board is"
+        if vote < 0:  # corner 0 is where the last should be: a half turn
             grid = grid[::-1, ::-1]
-        return grid.reshape(-1, 2).copy()
+        return grid.reshape(-1, 2).copy(), ""
 
-    def _detect_charuco(self, grey: np.ndarray) -> BoardView | None:
+    def _charuco_view(self, grey: np.ndarray) -> tuple[BoardView | None, str]:
+        """The ChArUco corners found, refined and checked, or None and why not."""
         corners, ids, _, _ = cv2.aruco.CharucoDetector(self._charuco).detectBoard(grey)
-        if ids is None or len(ids) < MIN_CHARUCO_CORNERS:
-            return None
+        if ids is None or len(ids) == 0:
+            return None, NOT_FOUND
+        if len(ids) < MIN_CHARUCO_CORNERS:
+            return None, f"only {len(ids)} corners found; at least {MIN_CHARUCO_CORNERS} needed"
         ids = ids.ravel().astype(np.int64)
         order = np.argsort(ids)
         # The window must stay within the white margin around the markers.
         reach = min(1.0 / 3.0, 0.8 * (self.square - self.marker) / (2.0 * self.square))
         ids, pixels = ids[order], _refined(grey, corners.reshape(-1, 2)[order], reach)
         spread = np.linalg.svd(self.object_points[ids, :2] - self.object_points[ids, :2].mean(0))
-        if spread.S[-1] < 0.5 * self.square:  # all corners (nearly) on one line
-            return None
-        return BoardView(ids=ids, pixels=pixels)
+        if spread.S[-1] < 0.5 * self.square:
+            return None, "the corners found lie (nearly) on one line"
+        problem = grid_problem(self.object_points[:, :2], ids, pixels, self.corner_grid[0])
+        if problem:
+            return None, f"rejected: {problem}"
+        return BoardView(ids=ids, pixels=pixels, detector="charuco"), ""
 
 
 def _refined(grey: np.ndarray, pixels: np.ndarray, reach: float) -> np.ndarray:
@@ -239,6 +306,32 @@ def _mean_around(grey: np.ndarray, point: np.ndarray, radius: int = 1) -> float 
     if not (radius <= u < width - radius and radius <= v < height - radius):
         return None
     return float(grey[v - radius : v + radius + 1, u - radius : u + radius + 1].mean())
+
+
+def _colour_vote(grey: np.ndarray, grid: np.ndarray) -> float:
+    """How strongly (-1 .. 1) the inner squares of a checkerboard's corner grid (rows,
+    columns, 2) say that the square between corners (i, j) and (i + 1, j + 1) is black
+    when i + j is even (+1: every pair of neighbouring squares agrees; -1: every pair says
+    the board is half turned; NaN when no pair can be measured)."""
+    centres = (grid[:-1, :-1] + grid[:-1, 1:] + grid[1:, :-1] + grid[1:, 1:]) / 4.0
+    spacing = min(
+        np.linalg.norm(np.diff(grid, axis=0), axis=-1).min(),
+        np.linalg.norm(np.diff(grid, axis=1), axis=-1).min(),
+    )
+    radius = max(1, int(0.15 * spacing))
+    levels = np.array(
+        [[_mean_around(grey, c, radius) for c in row] for row in centres], dtype=np.float64
+    )
+    black = np.add.outer(np.arange(levels.shape[0]), np.arange(levels.shape[1])) % 2 == 0
+    darker = np.where(black, -levels, levels)  # larger where the square is as expected
+    pairs = np.concatenate(
+        [
+            (darker[:, :-1] + darker[:, 1:]).ravel(),
+            (darker[:-1] + darker[1:]).ravel(),
+        ]
+    )
+    pairs = pairs[np.isfinite(pairs)]
+    return float(np.sign(pairs).mean()) if len(pairs) else float("nan")
 
 
 def parse_board(spec: str) -> Board:

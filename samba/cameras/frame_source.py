@@ -39,6 +39,10 @@ class FrameSource:
         """Whether the frames come from a video file."""
         return not self.images
 
+    def label(self, number: int) -> str:
+        """Frame `number` as a user knows it: the image's file name, or "frame N"."""
+        return f"frame {number}" if self.is_video else self.images[number].name
+
     def frames(self, every: int = 1) -> Iterator[tuple[int, np.ndarray]]:
         """(frame number, BGR uint8 image (h, w, 3)) of frames 0, every,
         2 every, ...; InputError for an unreadable image or video, or an image whose size
