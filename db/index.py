@@ -62,12 +62,14 @@ EXACT_FETCH = 2
 """Exact queries first fetch this many times k candidates (more when not certified)."""
 APPROXIMATE_FETCH = 4
 """Approximate queries fetch this many times k candidates and re-rank them."""
-SCAN_LIMIT = 20_000
+SCAN_LIMIT = 100_000
 """Largest table a query scans rather than searching its cells (compiled kernels; any
-eps) or its tree (numpy; exact queries). bench_db, single queries, 2026-12-05: numpy's
-scan ties the exact tree at 10^4 poses and takes 1.7x its time at 3 x 10^4; the compiled
-scan takes 53 us at 1.6 x 10^4 poses, the cells 55-83 us at 3 x 10^4 (without the 0.06 s
-their k-means costs a masked table once)."""
+eps) or its tree (numpy; exact queries). A scan needs nothing built: a masked table
+searched by cells or a tree is built when a marker is first lost (a k-means of 0.05 s at
+3 x 10^4 poses, 0.2 s at 10^5), which stalls a live frame (`best` with 10% dropout:
+p99 55 ms with a limit of 20,000, 2026-12-05). bench_db, single queries, 2026-12-05:
+the compiled scan 0.05 ms at 1.6 x 10^4 poses and 0.5 ms at 10^5, the cells 0.06-0.1 ms;
+numpy's scan ties the exact tree at 10^4 and takes 1.7x its time at 3 x 10^4."""
 SCAN_CHUNK = 64
 """Queries scanned per matrix product (bounds the (chunk, n) distance block)."""
 THREADED_BATCH = 64
