@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import threading
 import zipfile
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
@@ -72,6 +73,11 @@ the compiled scan 0.05 ms at 1.6 x 10^4 poses and 0.5 ms at 10^5, the cells 0.06
 numpy's scan ties the exact tree at 10^4 and takes 1.7x its time at 3 x 10^4."""
 SCAN_CHUNK = 64
 """Queries scanned per matrix product (bounds the (chunk, n) distance block)."""
+BACKGROUND_CELLS_FROM = 20_000
+"""A scanned table of more poses gets its cells built in the background and is searched
+by them once they are ready (the compiled scan: 0.05 ms at 1.6 x 10^4 poses, 0.5 ms at
+10^5; the cells 0.06-0.1 ms)."""
+_BACKGROUND_LOCK = threading.Lock()
 THREADED_BATCH = 64
 """Batches of at least this many queries are split over the cores (compiled kernels)."""
 
@@ -88,6 +94,19 @@ class _Tree:
     basis: np.ndarray  # (3 * present, dims), orthonormal columns
     prebuilt: cKDTree | None = None
     prebuilt_cells: VoronoiCells | None = None
+
+    def _cells_in_background(self) -> VoronoiCells | None:
+        """The cells once built; the first call starts building them in a thread (no
+        query waits for a k-means), later ones return None until they are ready."""
+        built = self.__dict__.get("cells")
+        if built is not None:
+            return built
+        with _BACKGROUND_LOCK:
+            if "_building" not in self.__dict__:
+                thread = threading.Thread(target=lambda: self.cells, daemon=True)
+                self.__dict__["_building"] = thread
+                thread.start()
+        return None
 
     @cached_property
     def cells(self) -> VoronoiCells:
@@ -156,17 +175,21 @@ class _Tree:
     def _compiled_query(
         self, f: np.ndarray, k: int, eps: float, scan: bool
     ) -> tuple[np.ndarray, np.ndarray]:
-        """`query` by the compiled kernels: the scan, or the cells (`eps` as the tree's);
-        batches of `THREADED_BATCH` or more queries are split over the cores (the kernels
+        """`query` by the compiled kernels: the scan, or the cells (`eps` as the tree's).
+        A table that may be scanned but holds more than `BACKGROUND_CELLS_FROM` poses is
+        scanned while its cells are built in the background, then searched by them.
+        Batches of `THREADED_BATCH` or more queries are split over the cores (the kernels
         release the GIL)."""
         kernels = _kernels()
-        if scan:
+        cells = self.cells if not scan else None
+        if scan and len(self.features) > BACKGROUND_CELLS_FROM:
+            cells = self._cells_in_background()
+        if cells is None:
 
             def search(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 return kernels.scan_kernel(self.features, part, k)
 
         else:
-            cells = self.cells
 
             def search(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 d, i = kernels.cells_kernel(
@@ -351,7 +374,12 @@ class PoseIndex:
             return self._full
         tree = self._masked.get(mask)
         if tree is None:
-            features = marker_features(self.poses, keep, self.scale_by_tibia)
+            if kernels_enabled():
+                features = _kernels().marker_features_kernel(
+                    np.asarray(self.poses), keep, self.scale_by_tibia
+                )
+            else:
+                features = marker_features(self.poses, keep, self.scale_by_tibia)
             tree = _Tree.build(features, self.dims)
             self._masked[mask] = tree
             if len(self._masked) > MAX_MASK_TREES:

@@ -3,6 +3,8 @@
 | kernel | numpy reference |
 |---|---|
 | `scan_kernel` | `_Tree._scan` (`samba.db.index`): a float32 ranking, re-ranked exactly |
+| `cells_kernel` | brute force (`scan_kernel`), over k-means cells (`samba.db.cells`) |
+| `marker_features_kernel` | `marker_features` (`samba.db.index`) |
 
 A live frame queries one observation at a time; numpy's scan of it is a matrix product,
 an `argpartition` of every pose and a re-ranking (about 0.23 ms at 16,000 poses), the
@@ -16,6 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from samba.base import KernelSet, compiled
+from samba.body import MARKER_JOINTS, N_MARKERS
+from samba.body.kernels import alignment_of, apply_alignment
+
+_MARKER_JOINTS = np.array(MARKER_JOINTS)
 
 
 @compiled(reassociate=True)
@@ -128,6 +134,29 @@ def cells_kernel(
     return distances, indices
 
 
+@compiled
+def marker_features_kernel(poses: np.ndarray, keep: np.ndarray, scale_by_tibia: bool) -> np.ndarray:
+    """`marker_features`: the markers in `keep` (8,) bool of poses (n, 13, 3) meters,
+    aligned with the other markers masked, as (n, 3 * keep.sum()) float32."""
+    n = poses.shape[0]
+    kept = np.flatnonzero(keep)
+    out = np.empty((n, 3 * len(kept)), dtype=np.float32)
+    markers = np.empty((N_MARKERS, 3))
+    aligned = np.empty((N_MARKERS, 3))
+    origin = np.empty(3)
+    turn = np.empty(4)
+    for i in range(n):
+        for m in range(N_MARKERS):
+            for c in range(3):
+                markers[m, c] = poses[i, _MARKER_JOINTS[m], c]
+        alignment_of(markers, keep, scale_by_tibia, origin, turn)
+        apply_alignment(markers, origin, turn, aligned)
+        for slot in range(len(kept)):
+            for c in range(3):
+                out[i, 3 * slot + c] = aligned[kept[slot], c]
+    return out
+
+
 def _example_scan() -> tuple[np.ndarray, np.ndarray]:
     """Compile `scan_kernel` for the index's argument types."""
     return scan_kernel(np.zeros((4, 24), dtype=np.float32), np.zeros((1, 24)), 2)
@@ -143,7 +172,18 @@ def _example_cells() -> tuple[np.ndarray, np.ndarray]:
     )
 
 
+def _example_features() -> np.ndarray:
+    """Compile `marker_features_kernel` for the index's argument types (float32 and
+    float64 poses: a store's memory map and arrays)."""
+    keep = np.ones(N_MARKERS, dtype=np.bool_)
+    marker_features_kernel(np.ones((1, 13, 3), dtype=np.float32), keep, False)
+    return marker_features_kernel(np.ones((1, 13, 3)), keep, False)
+
+
 KERNELS = KernelSet(
-    "pose index", (scan_kernel, cells_kernel), (_example_scan, _example_cells), estimate_s=5.0
+    "pose index",
+    (scan_kernel, cells_kernel, marker_features_kernel),
+    (_example_scan, _example_cells, _example_features),
+    estimate_s=8.0,
 )
 """The index's kernels, warmed with every `PoseIndex`."""

@@ -70,3 +70,19 @@ def test_cells_are_exact_and_eps_bounds_the_error(index: PoseIndex, eps: float) 
     else:
         assert np.all(found <= truth * (1 + eps) + 1e-12)
         assert np.mean(np.isclose(found, truth, rtol=1e-12)) > 0.9
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("missing", [(3,), (0, 6), (0, 1)])
+def test_masked_features_kernel_agrees_with_numpy(
+    index: PoseIndex, dtype: type, missing: tuple[int, ...]
+) -> None:
+    from samba.db.kernels import marker_features_kernel
+
+    keep = np.ones(8, dtype=bool)
+    keep[list(missing)] = False
+    poses = np.asarray(index.poses, dtype=dtype)
+    for scale in (False, True):
+        got = marker_features_kernel(poses, keep, scale)
+        expected = marker_features(poses, keep, scale)
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6)

@@ -24,15 +24,8 @@ from __future__ import annotations
 import numpy as np
 
 from samba.base import KernelSet, compiled
-from samba.body import (
-    HEADING_PAIRS,
-    MARKER_JOINTS,
-    N_JOINTS,
-    N_MARKERS,
-    REFERENCE_TIBIA,
-    TIBIA_PAIRS,
-    standard_pose,
-)
+from samba.body import MARKER_JOINTS, N_JOINTS, N_MARKERS, standard_pose
+from samba.body.kernels import alignment_of, apply_alignment, invert_alignment
 
 _CHAIN_ROOTS = np.array([-1, 1, 2, 7, 8])
 """Root joint of each of the five chains (-1: the shoulder midpoint, for the neck)."""
@@ -43,8 +36,6 @@ _CHAIN_ENDS = np.array([0, 5, 6, 11, 12])
 _FIXED = np.array([1, 2, 7, 8])
 """Joints no pseudo-pose rotation moves."""
 _MARKER_JOINTS = np.array(MARKER_JOINTS)
-_HEADING = np.array(HEADING_PAIRS)
-_TIBIA = np.array(TIBIA_PAIRS)
 _DIMS = 3 * N_JOINTS
 
 
@@ -91,13 +82,13 @@ def local_solutions_kernel(
     for f in range(b):
         for i in range(N_MARKERS):
             present[i] = not np.isnan(markers[f, i, 0] + markers[f, i, 1] + markers[f, i, 2])
-        _alignment(markers[f], present, scale_by_tibia, origin, turn)
-        _apply(markers[f], origin, turn, aligned)
+        alignment_of(markers[f], present, scale_by_tibia, origin, turn)
+        apply_alignment(markers[f], origin, turn, aligned)
         observation_origin = origin.copy()
         observation_turn = turn.copy()
         for j in range(k):
-            _alignment(neighbours[f, j][_MARKER_JOINTS], present, scale_by_tibia, origin, turn)
-            _apply(neighbours[f, j], origin, turn, pose)
+            alignment_of(neighbours[f, j][_MARKER_JOINTS], present, scale_by_tibia, origin, turn)
+            apply_alignment(neighbours[f, j], origin, turn, pose)
             _pseudo_poses_of(pose, coefficients[j], samples[j * n : (j + 1) * n])
         _sample_weights(samples, aligned, present, bandwidth, min_bandwidth, weights)
         for i in range(N_MARKERS):
@@ -133,56 +124,6 @@ def local_solutions_kernel(
 
 
 @compiled
-def _alignment(
-    markers: np.ndarray,
-    present: np.ndarray,
-    scale_by_tibia: bool,
-    origin: np.ndarray,
-    turn: np.ndarray,
-) -> None:
-    """`Alignment.from_markers` of one marker set (8, 3) over its `present` markers: fills
-    `origin` (3,) and `turn` (cos(yaw) * scale, sin(yaw) * scale, scale, 1 / scale)."""
-    count = 0
-    origin[:] = 0.0
-    for i in range(N_MARKERS):
-        if present[i]:
-            count += 1
-            origin += markers[i]
-    origin /= max(count, 1)
-    yaw = 0.0
-    for pair in range(len(_HEADING)):
-        left, right = _HEADING[pair, 0], _HEADING[pair, 1]
-        if present[left] and present[right]:
-            yaw = np.arctan2(
-                markers[left, 2] - markers[right, 2], markers[left, 0] - markers[right, 0]
-            )
-            break
-    scale = 1.0
-    if scale_by_tibia:
-        total = 0.0
-        known = 0
-        for pair in range(len(_TIBIA)):
-            knee, foot = _TIBIA[pair, 0], _TIBIA[pair, 1]
-            if present[knee] and present[foot]:
-                total += np.sqrt(np.sum((markers[knee] - markers[foot]) ** 2))
-                known += 1
-        if known > 0 and total / known > 1e-6:
-            scale = REFERENCE_TIBIA / (total / known)
-    turn[0], turn[1], turn[2], turn[3] = np.cos(yaw) * scale, np.sin(yaw) * scale, scale, 1 / scale
-
-
-@compiled
-def _apply(points: np.ndarray, origin: np.ndarray, turn: np.ndarray, out: np.ndarray) -> None:
-    """`Alignment.apply`: points (p, 3) world to `out` (p, 3) canonical."""
-    c, s, scale = turn[0], turn[1], turn[2]
-    for i in range(points.shape[0]):
-        x, y, z = points[i, 0] - origin[0], points[i, 1] - origin[1], points[i, 2] - origin[2]
-        out[i, 0] = c * x + s * z
-        out[i, 1] = scale * y
-        out[i, 2] = c * z - s * x
-
-
-@compiled
 def part_estimates_kernel(
     markers: np.ndarray, neighbours: np.ndarray, distances: np.ndarray, scale_by_tibia: bool
 ) -> np.ndarray:
@@ -206,24 +147,13 @@ def part_estimates_kernel(
         for j in range(k):
             weight = np.exp(-((distances[f, j] / nearest) ** 2))
             total += weight
-            _alignment(neighbours[f, j][_MARKER_JOINTS], present, scale_by_tibia, origin, turn)
-            _apply(neighbours[f, j], origin, turn, aligned)
+            alignment_of(neighbours[f, j][_MARKER_JOINTS], present, scale_by_tibia, origin, turn)
+            apply_alignment(neighbours[f, j], origin, turn, aligned)
             mean += weight * aligned
         mean /= total
-        _alignment(markers[f], present, scale_by_tibia, origin, turn)
-        _invert(mean, origin, turn, out[f])
+        alignment_of(markers[f], present, scale_by_tibia, origin, turn)
+        invert_alignment(mean, origin, turn, out[f])
     return out
-
-
-@compiled
-def _invert(points: np.ndarray, origin: np.ndarray, turn: np.ndarray, out: np.ndarray) -> None:
-    """`Alignment.invert`: canonical points (p, 3) back to `out` (p, 3) in the world."""
-    c, s, inverse = turn[0] * turn[3], turn[1] * turn[3], turn[3]
-    for i in range(points.shape[0]):
-        x, y, z = points[i, 0], points[i, 1], points[i, 2]
-        out[i, 0] = (c * x - s * z) * inverse + origin[0]
-        out[i, 1] = y * inverse + origin[1]
-        out[i, 2] = (s * x + c * z) * inverse + origin[2]
 
 
 @compiled
@@ -239,7 +169,7 @@ def _to_world(
     of the alignment (`origin`, `turn`): world_offset = `Alignment.invert(offset)` and
     gain R^T gain R per joint block, anchor (39,) the origin per joint."""
     c, s = turn[0] * turn[3], turn[1] * turn[3]
-    _invert(offset.reshape(N_JOINTS, 3), origin, turn, world_offset.reshape(N_JOINTS, 3))
+    invert_alignment(offset.reshape(N_JOINTS, 3), origin, turn, world_offset.reshape(N_JOINTS, 3))
     for j in range(N_JOINTS):
         anchor[3 * j : 3 * j + 3] = origin
     # R = [[c, 0, s], [0, 1, 0], [-s, 0, c]] takes world to canonical directions.
