@@ -221,13 +221,13 @@ def test_prepared_index_builds_nothing_when_markers_are_lost(
     r = chosen.build(PoseIndex.build(poses))
     assert r.prepare(2) == 36
     built: list[np.ndarray] = []
-    real = samba.db.index.marker_features
+    real = samba.db.index._Tree.build
 
-    def counted(poses: np.ndarray, keep: np.ndarray, *args: object) -> np.ndarray:
-        built.append(keep)
-        return real(poses, keep, *args)
+    def counted(features: np.ndarray, *args: object, **kwargs: object) -> object:
+        built.append(features)
+        return real(features, *args, **kwargs)
 
-    monkeypatch.setattr(samba.db.index, "marker_features", counted)
+    monkeypatch.setattr(samba.db.index._Tree, "build", counted)
     _, markers = _observe("walk", seed=502)
     lost = np.random.default_rng(1).random(markers.shape[:2]) < 0.1
     lost[np.cumsum(lost, axis=1) > 2] = False  # at most two markers lost per frame
