@@ -90,10 +90,25 @@ class _Tree:
     ones of small stores) never build it."""
 
     features: np.ndarray  # (n, 3 * present) float32, aligned markers present in the mask
-    mean: np.ndarray  # (3 * present,)
-    basis: np.ndarray  # (3 * present, dims), orthonormal columns
+    dims: int  # principal dimensions the tree keeps
+    prebuilt_projection: tuple[np.ndarray, np.ndarray] | None = None
     prebuilt: cKDTree | None = None
     prebuilt_cells: VoronoiCells | None = None
+
+    @cached_property
+    def projection(self) -> tuple[np.ndarray, np.ndarray]:
+        """The tree's (mean (D,), basis (D, dims) orthonormal columns) of the features'
+        principal dimensions, made on first use unless prebuilt (the compiled search
+        never needs them)."""
+        if self.prebuilt_projection is not None:
+            return self.prebuilt_projection
+        features = self.features
+        mean = features.mean(axis=0, dtype=np.float64)
+        centered = features - mean.astype(np.float32)
+        cov = (centered.T @ centered).astype(np.float64) / max(len(features), 1)
+        _, vectors = np.linalg.eigh(cov)
+        dims = min(self.dims, features.shape[1])
+        return mean, np.ascontiguousarray(vectors[:, ::-1][:, :dims])
 
     def _cells_in_background(self) -> VoronoiCells | None:
         """The cells once built; the first call starts building them in a thread (no
@@ -121,7 +136,7 @@ class _Tree:
         """The k-d tree over the features projected onto `basis`."""
         if self.prebuilt is not None:
             return self.prebuilt
-        return _reduced_tree(self.features, self.mean, self.basis)
+        return _reduced_tree(self.features, *self.projection)
 
     @cached_property
     def _scanned(self) -> tuple[np.ndarray, np.ndarray, float]:
@@ -134,19 +149,14 @@ class _Tree:
 
     @classmethod
     def build(cls, features: np.ndarray, dims: int, prebuild: bool = False) -> _Tree:
-        """The table of features (n, D) projected to `dims` principal dimensions, with its
-        tree and cells built now when `prebuild`."""
-        features = np.ascontiguousarray(features, dtype=np.float32)
-        mean = features.mean(axis=0, dtype=np.float64)
-        centered = features - mean.astype(np.float32)
-        cov = (centered.T @ centered).astype(np.float64) / max(len(features), 1)
-        _, vectors = np.linalg.eigh(cov)
-        dims = min(dims, features.shape[1])
-        basis = np.ascontiguousarray(vectors[:, ::-1][:, :dims])
+        """The table of features (n, D), its tree to keep `dims` principal dimensions,
+        with its projection, tree and cells built now when `prebuild`."""
+        table = cls(np.ascontiguousarray(features, dtype=np.float32), dims)
         if not prebuild:
-            return cls(features, mean, basis)
-        tree = _reduced_tree(features, mean, basis)
-        return cls(features, mean, basis, tree, VoronoiCells.build(features))
+            return table
+        projection = table.projection
+        tree = _reduced_tree(table.features, *projection)
+        return cls(table.features, dims, projection, tree, VoronoiCells.build(table.features))
 
     def query(self, f: np.ndarray, k: int, eps: float, scan: bool) -> tuple[np.ndarray, np.ndarray]:
         """k nearest of features f (b, D): distances (b, k), indices (b, k).
@@ -160,7 +170,8 @@ class _Tree:
         if scan:
             return self._scan(f, k)
         n = len(self.features)
-        z = (f - self.mean) @ self.basis
+        mean, basis = self.projection
+        z = (f - mean) @ basis
         f32 = f.astype(np.float32)
         fetch = min((EXACT_FETCH if eps == 0 else APPROXIMATE_FETCH) * k, n)
         dist, idx, bound = self._rerank(z, f32, k, fetch, eps)
@@ -400,8 +411,8 @@ class PoseIndex:
             "dims": np.array(self.dims),
             "scale_by_tibia": np.array(self.scale_by_tibia),
             "features": full.features,
-            "mean": full.mean,
-            "basis": full.basis,
+            "mean": full.projection[0],
+            "basis": full.projection[1],
             "tree_state": np.array(len(state)),
             **full.cells.arrays("cells_"),
         }
@@ -438,7 +449,8 @@ class PoseIndex:
                 tree = cKDTree.__new__(cKDTree)
                 tree.__setstate__(state)
                 cells = VoronoiCells.from_arrays(features, data, "cells_")
-                full = _Tree(features, data["mean"], data["basis"], tree, cells)
+                projection = (data["mean"], data["basis"])
+                full = _Tree(features, int(data["dims"]), projection, tree, cells)
                 return cls(
                     poses,
                     full,
