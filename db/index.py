@@ -188,13 +188,16 @@ class _Tree:
     ) -> tuple[np.ndarray, np.ndarray]:
         """`query` by the compiled kernels: the scan, or the cells (`eps` as the tree's).
         A table that may be scanned but holds more than `BACKGROUND_CELLS_FROM` poses is
-        scanned while its cells are built in the background, then searched by them.
+        scanned while its cells are built in the background, then searched by them,
+        exactly as the scan (eps ignored), so that no answer depends on when they were
+        ready.
         Batches of `THREADED_BATCH` or more queries are split over the cores (the kernels
         release the GIL)."""
         kernels = _kernels()
         cells = self.cells if not scan else None
         if scan and len(self.features) > BACKGROUND_CELLS_FROM:
             cells = self._cells_in_background()
+            eps = 0.0  # exact like the scan: the answer must not depend on the build's timing
         if cells is None:
 
             def search(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
