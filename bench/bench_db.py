@@ -1,12 +1,15 @@
 """Pose database benchmark: import throughput, index build and query latency, store size.
 
 Run from the project root:  python bench/bench_db.py [--sizes 10000,100000,1000000]
+(import throughput alone: python bench/bench_db.py --sections import --repeats 5)
 
 Needs the shared CMU data (../shared/data or $SAMBA_DATA). Every table carries a
 baseline measured in the same run:
 
 * import: `np.loadtxt` of the files' motion sections alone (the cost of reading the
-  numbers, before any mapping, kinematics or normalisation);
+  numbers, before any mapping, kinematics or normalisation), beside the BVH reader's
+  compiled kernel on the same sections, whole-file parsing, conversion to takes and
+  `samba db import` itself; the stages alternate round by round;
 * queries: a plain scipy k-d tree over the raw 24-D aligned marker features.
 
 Exact queries are timed through the tree and, up to 200,000 poses, by the scan that
@@ -46,7 +49,10 @@ from samba.body.skeleton import N_MARKERS, markers_of  # noqa: E402
 from samba.body.take import Take  # noqa: E402
 from samba.db.index import APPROXIMATE_EPS, SCAN_LIMIT, PoseIndex, marker_features  # noqa: E402
 from samba.db.store import PoseStore  # noqa: E402
+from samba.ingest import reader_kernels  # noqa: E402
 from samba.ingest.batch import import_paths  # noqa: E402
+from samba.ingest.bvh import _read_table as read_motion_table  # noqa: E402
+from samba.ingest.bvh import parse_bvh  # noqa: E402
 from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
 
 K = 10
@@ -72,57 +78,77 @@ def rss_mb() -> float:
     return kb / 1024
 
 
-def best_of(repeats: int, fn: Callable[[], object]) -> float:
-    """The shortest wall time (seconds) of `repeats` calls of fn() (timeit's convention)."""
-    times = []
+def motion_section(data: bytes) -> np.ndarray:
+    """The frame lines of a BVH file's bytes, everything after its 'Frame Time:' line, as
+    a uint8 array (a view, no copy)."""
+    start = data.index(b"\n", data.index(b"Frame Time")) + 1
+    return np.frombuffer(data, dtype=np.uint8, offset=start)
+
+
+def best_of_rounds(repeats: int, stages: dict[str, Callable[[], object]]) -> dict[str, float]:
+    """The shortest wall time (seconds) of each stage over `repeats` rounds, every round
+    running each stage once in turn: a noisy machine slows all stages alike."""
+    best = dict.fromkeys(stages, float("inf"))
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
+        for name, stage in stages.items():
+            t0 = time.perf_counter()
+            stage()
+            best[name] = min(best[name], time.perf_counter() - t0)
+    return best
 
 
 def bench_import(files: list[Path], repeats: int = 3) -> np.ndarray:
-    """Import throughput (best of `repeats` runs per stage); returns the real poses."""
+    """Import throughput, each stage the best of `repeats` alternating rounds, against
+    `np.loadtxt` of the same files' numbers in the same run; returns the real poses."""
+    shapes = [parse_bvh(f.read_bytes()).motion.shape for f in files]
+    reader_kernels().warm_up()  # compiled once per install, loaded once per process
 
-    def parse_numbers() -> None:
+    def loadtxt_numbers() -> None:
         for f in files:
             text = f.read_text()
             np.loadtxt(io.StringIO(text[text.index("Frame Time") :].split("\n", 1)[1]), ndmin=2)
 
+    def reader_numbers() -> None:
+        for f, (frames, channels) in zip(files, shapes, strict=True):
+            body = motion_section(f.read_bytes())
+            assert read_motion_table(body, frames, channels) is not None
+
+    def parse_files() -> None:
+        for f in files:
+            parse_bvh(f.read_bytes(), source=str(f))
+
     def import_all() -> None:
-        with tempfile.TemporaryDirectory() as tmp:
-            store = PoseStore.create(Path(tmp) / "s")
-            results = import_paths(store, files, progress=False)
-            assert all(r.status == "added" for r in results)
+        results = import_paths(next(empty_stores), files, progress=False)
+        assert all(r.status == "added" for r in results)
 
     takes = [load_bvh_take(f) for f in files]
     poses = np.concatenate([t.poses for t in takes])
     source_frames = sum(t.source_frames for t in takes)
-    base = best_of(repeats, parse_numbers)
-    convert = best_of(repeats, lambda: [load_bvh_take(f) for f in files])
-    full = best_of(repeats, import_all)
+    stages = {
+        "baseline: np.loadtxt of the motion sections": loadtxt_numbers,
+        "motion reader (compiled kernel) of the same": reader_numbers,
+        "parse_bvh: whole files (hierarchy + motion)": parse_files,
+        "read + map + FK + resample + normalise": lambda: [load_bvh_take(f) for f in files],
+        "samba db import (group commits + index)": import_all,
+    }
+    with tempfile.TemporaryDirectory() as tmp:  # `samba db init` is no part of an import
+        empty_stores = iter([PoseStore.create(Path(tmp) / f"s{k}") for k in range(repeats)])
+        seconds = best_of_rounds(repeats, stages)
+    base = seconds["baseline: np.loadtxt of the motion sections"]
     rows = [
-        ["baseline: np.loadtxt of motion data", base, source_frames / base, "", 1.0],
         [
-            "read + map + FK + resample + normalise",
-            convert,
-            source_frames / convert,
-            len(poses) / convert,
-            base / convert,
-        ],
-        [
-            "samba db import (store commits + index)",
-            full,
-            source_frames / full,
-            len(poses) / full,
-            base / full,
-        ],
+            stage,
+            t,
+            source_frames / t,
+            len(poses) / t if stage.startswith(("read", "samba")) else "",
+            base / t,
+        ]
+        for stage, t in seconds.items()
     ]
     print_table(
         f"Import: {len(files)} CMU files, {source_frames} source frames -> {len(poses)} poses"
-        f" at 30 fps (one core, best of {repeats} runs)",
-        ["stage", "seconds", "source frames/s", "poses/s", "speed vs baseline"],
+        f" at 30 fps (one core, best of {repeats} alternating rounds)",
+        ["stage", "seconds", "source frames/s", "poses/s", "rate vs np.loadtxt"],
         rows,
     )
     return poses
@@ -289,17 +315,29 @@ def bench_store(real: np.ndarray, n: int, rng: np.random.Generator) -> None:
 
 
 def main() -> None:
-    """Run every section and print its table."""
+    """Run the chosen sections and print their tables."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--sizes", default="10000,100000,1000000", help="database sizes for the index benchmark"
     )
+    parser.add_argument(
+        "--sections",
+        default="import,index,store",
+        help="comma-separated sections: import, index, store (default all; import always "
+        "runs, its poses feed the others)",
+    )
+    parser.add_argument(
+        "--repeats", type=int, default=3, help="rounds of the import section (best of)"
+    )
     args = parser.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
+    sections = set(args.sections.split(","))
     rng = np.random.default_rng(0)
-    real = bench_import(sorted(data_dir().glob("*.bvh")))
-    bench_index(real, sizes, rng)
-    bench_store(real, max(sizes), rng)
+    real = bench_import(sorted(data_dir().glob("*.bvh")), repeats=args.repeats)
+    if "index" in sections:
+        bench_index(real, sizes, rng)
+    if "store" in sections:
+        bench_store(real, max(sizes), rng)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ from samba.db.index import PoseIndex, index_kernels
 from samba.db.shape_tree_file import read_shape_tree, stored_tree, tree_path, write_shape_tree
 from samba.db.store import AddResult, PoseStore, VerifyReport
 from samba.db.synthetic_store import build_synthetic_store
+from samba.db.take_rows import check_addable
 
 __all__ = [
     "AddResult",
@@ -18,6 +19,7 @@ __all__ = [
     "StoreError",
     "VerifyReport",
     "build_synthetic_store",
+    "check_addable",
     "index_kernels",
     "read_shape_tree",
     "stored_tree",

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -48,27 +49,28 @@ def map_committed(store: Path, name: str, n: int) -> tuple[np.ndarray, np.ndarra
     return poses, np.memmap(rows_file, dtype=np.int32, mode="r", shape=(n, 2))
 
 
-def append_rows(
-    store: Path,
-    name: str,
-    n: int,
-    takes: Sequence[np.ndarray],
-    ids: Sequence[int],
-    frames: np.ndarray,
-) -> None:
-    """Write the poses (f, 13, 3) meters of each of `takes`, with its take id of `ids` and
-    the frame numbers `frames` (f,) shared by all, after the first `n` committed rows of
-    the data files `name` (cutting off any rows an interrupted import left there), and
-    fsync them."""
+@dataclass(frozen=True)
+class PoseBlock:
+    """The poses of one take as appended: `poses` (f, 13, 3) meters, its catalog id
+    `take_id`, and the frame number (f,) of each pose."""
+
+    poses: np.ndarray
+    take_id: int
+    frames: np.ndarray
+
+
+def append_rows(store: Path, name: str, n: int, blocks: Sequence[PoseBlock]) -> None:
+    """Write `blocks`, in order, after the first `n` committed rows of the data files
+    `name` (cutting off any rows an interrupted import left there), and fsync them once."""
     poses_file, rows_file = data_files(store, name)
     with open(poses_file, "r+b") as pf, open(rows_file, "r+b") as rf:
         pf.truncate(n * POSE_BYTES)
         rf.truncate(n * ROW_BYTES)
         pf.seek(n * POSE_BYTES)
         rf.seek(n * ROW_BYTES)
-        for data, take_id in zip(takes, ids, strict=True):
-            pf.write(np.ascontiguousarray(data, dtype=np.float32).tobytes())
-            rows = np.stack([np.full(len(data), take_id), frames], axis=1)
+        for block in blocks:
+            pf.write(np.ascontiguousarray(block.poses, dtype=np.float32).tobytes())
+            rows = np.stack([np.full(len(block.poses), block.take_id), block.frames], axis=1)
             rf.write(rows.astype(np.int32).tobytes())
         for fh in (pf, rf):
             fh.flush()

@@ -8,13 +8,14 @@ Layout of a store directory:
   and frame number.
 * `index.npz`: the prebuilt k-d tree index (`samba.db.index`), tagged with the generation.
 
-Writers hold an exclusive `flock` on `lock`. An import appends pose rows past the
-committed count, fsyncs, then commits the catalog rows and the new count in one SQLite
-transaction; rows past the committed count are garbage from an interrupted import and are
-cut off by the next writer. Deleting takes writes compacted data files under a new name
-and switches to them in one transaction. So a kill at any moment leaves the previous or
-the new state. A reader takes a snapshot when it opens (catalog rows in memory, the
-committed prefix of the data files mapped) and keeps it while writers go on.
+Writers hold an exclusive `flock` on `lock`. An import (of one take, or of a group of
+takes at once: `add_many`) appends pose rows past the committed count, fsyncs, then
+commits the catalog rows and the new count in one SQLite transaction; rows past the
+committed count are garbage from an interrupted import and are cut off by the next
+writer. Deleting takes writes compacted data files under a new name and switches to them
+in one transaction. So a kill at any moment leaves the previous or the new state. A
+reader takes a snapshot when it opens (catalog rows in memory, the committed prefix of
+the data files mapped) and keeps it while writers go on.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from samba.body import Take, mirror_poses
+from samba.body import Take
 from samba.db.catalog import (
     FORMAT,
     SCHEMA,
@@ -46,6 +47,7 @@ from samba.db.errors import StoreCorruptedError, StoreError
 from samba.db.index import PoseIndex
 from samba.db.pose_files import (
     DATA_PREFIXES,
+    PoseBlock,
     append_rows,
     checksum,
     data_files,
@@ -54,6 +56,13 @@ from samba.db.pose_files import (
     map_committed,
     write_compacted,
 )
+from samba.db.take_rows import (
+    PreparedTake,
+    check_addable,
+    insert_takes,
+    stored_copy,
+)
+from samba.db.take_rows import drop_near_duplicates as drop_near_duplicates
 
 CATALOG = "catalog.sqlite"
 INDEX = "index.npz"
@@ -84,20 +93,6 @@ class VerifyReport:
     def ok(self) -> bool:
         """True when no problem was found."""
         return not self.problems
-
-
-def drop_near_duplicates(poses: np.ndarray, min_change: float) -> np.ndarray:
-    """Indices of the poses (n, 13, 3) to keep: a pose is kept when some joint moved more
-    than `min_change` meters since the last kept pose. The first pose is always kept."""
-    if min_change <= 0 or len(poses) == 0:
-        return np.arange(len(poses))
-    keep = [0]
-    last = poses[0]
-    for i in range(1, len(poses)):
-        if np.max(np.linalg.norm(poses[i] - last, axis=-1)) > min_change:
-            keep.append(i)
-            last = poses[i]
-    return np.array(keep)
 
 
 class PoseStore:
@@ -399,65 +394,62 @@ class PoseStore:
         `build_index` the index is rebuilt and saved after the commit. A take without
         poses raises `StoreError` before anything is written.
         """
-        if len(take) == 0:
-            raise StoreError(take.source or take.name, "the take holds no poses")
-        keep = drop_near_duplicates(take.poses, min_change)
-        poses = take.poses[keep]
-        frames = take.frames[keep]
-        variants = [(poses, False)] + ([(mirror_poses(poses), True)] if mirror else [])
+        return self.add_many([take], mirror, min_change, build_index)[0]
+
+    def add_many(
+        self,
+        takes: Sequence[Take],
+        mirror: bool = False,
+        min_change: float = 0.0,
+        build_index: bool = True,
+    ) -> list[AddResult]:
+        """Import `takes` in one commit (one fsync of the data files, one catalog
+        transaction): after a crash the store holds all of them or none. Each take is
+        added as by `add`, in order; a take whose content is already stored, or comes
+        earlier in `takes`, is a duplicate of it. Returns one result per take. A take
+        without poses raises `StoreError` before anything is written.
+        """
+        for take in takes:
+            check_addable(take)
+        batch = [PreparedTake.of(take, mirror, min_change) for take in takes]
         try:
-            ids = self._add_variants(take, variants, frames)
-        except _DuplicateError as dup:
-            return AddResult(frames_in=len(take), duplicate_of=dup.take_id)
+            results = self._add_prepared(batch)
+        except _NothingAddedError as nothing:
+            return nothing.results
         if build_index:
             self.build_index()
-        return AddResult(take_ids=tuple(ids), frames_in=len(take), frames_kept=len(poses))
+        return results
 
-    def _add_variants(
-        self, take: Take, variants: list[tuple[np.ndarray, bool]], frames: np.ndarray
-    ) -> list[int]:
+    def _add_prepared(self, batch: list[PreparedTake]) -> list[AddResult]:
+        """Insert the catalog rows of every take of `batch` that is not a duplicate,
+        append their poses and commit; `_NothingAddedError` (a rollback) when all are."""
         with self._writing(appends_only=True) as conn:
-            row = conn.execute(
-                "SELECT id FROM takes WHERE content_hash = ? AND mirrored = 0",
-                (take.content_hash,),
-            ).fetchone()
-            if row is not None:
-                raise _DuplicateError(row[0])
             n = int(read_state(conn)["n_poses"])
             now = datetime.now(UTC).isoformat(timespec="seconds")
-            ids: list[int] = []
+            results: list[AddResult] = []
+            blocks: list[PoseBlock] = []
             first = n
-            for data, mirrored in variants:
-                data = np.ascontiguousarray(data, dtype=np.float32)
-                cur = conn.execute(
-                    "INSERT INTO takes (name, source, content_hash, mirrored, mirror_of, rig, "
-                    "subject, action, tags, fps, frame_count, source_frames, first_row, "
-                    "checksum, meta, warnings, added_at) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, '[]', ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (
-                        take.name + (" (mirrored)" if mirrored else ""),
-                        take.source,
-                        take.content_hash,
-                        int(mirrored),
-                        ids[0] if mirrored else None,
-                        take.rig,
-                        take.subject,
-                        take.action,
-                        take.fps,
-                        len(data),
-                        take.source_frames,
-                        first,
-                        checksum(data),
-                        json.dumps(take.meta),
-                        json.dumps(take.warnings),
-                        now,
-                    ),
+            for prepared in batch:
+                duplicate = stored_copy(conn, prepared.take.content_hash)
+                if duplicate is not None:
+                    results.append(AddResult(frames_in=len(prepared.take), duplicate_of=duplicate))
+                    continue
+                ids = insert_takes(conn, prepared, first, now)
+                for (data, _), take_id in zip(prepared.variants, ids, strict=True):
+                    blocks.append(PoseBlock(data, take_id, prepared.frames))
+                    first += len(data)
+                results.append(
+                    AddResult(
+                        take_ids=tuple(ids),
+                        frames_in=len(prepared.take),
+                        frames_kept=len(prepared.frames),
+                    )
                 )
-                ids.append(int(cur.lastrowid))
-                first += len(data)
-            append_rows(self.path, self.data_name, n, [d for d, _ in variants], ids, frames)
+            if not blocks:
+                raise _NothingAddedError(results)
+            append_rows(self.path, self.data_name, n, blocks)
             conn.execute("UPDATE state SET value = ? WHERE key = 'n_poses'", (str(first),))
-        return ids
+        return results
 
     def remove(self, refs: Sequence[int | str]) -> list[int]:
         """Delete takes by id or name (a take's mirror goes with it); returns the ids
@@ -577,7 +569,10 @@ class PoseStore:
             raise StoreCorruptedError(f"{self.path}: " + "; ".join(report.problems))
 
 
-class _DuplicateError(Exception):
-    def __init__(self, take_id: int) -> None:
-        super().__init__(take_id)
-        self.take_id = take_id
+class _NothingAddedError(Exception):
+    """Every take of a batch is a duplicate: the transaction rolls back (a commit would
+    make the saved index stale for nothing); `results` says what each take duplicates."""
+
+    def __init__(self, results: list[AddResult]) -> None:
+        super().__init__(len(results))
+        self.results = results

@@ -5,7 +5,7 @@ joint centres of a full marker set by published rules.
 """
 
 from samba.ingest.batch import FileResult, expand_paths, import_paths
-from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh
+from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh, reader_kernels
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.c3d_take import MarkerTake, read_c3d
 from samba.ingest.errors import BvhError, C3dError, RigError
@@ -49,6 +49,7 @@ __all__ = [
     "read_marker_take",
     "read_recorded_markers",
     "read_take",
+    "reader_kernels",
     "reference_joints",
     "resolve_humanoid",
     "rig_of",

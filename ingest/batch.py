@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -10,19 +11,24 @@ from tqdm import tqdm
 
 from samba.base import SambaError
 from samba.body import Take
-from samba.db import PoseStore
+from samba.db import AddResult, PoseStore, check_addable
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.mcap_take import read_take
 
 SUFFIXES = (".bvh", ".mcap")
 """Files picked up in named folders: BVH and takes recorded by the live service."""
+COMMIT_FILES = 64
+"""Most files whose takes `import_paths` commits together."""
+COMMIT_SECONDS = 1.0
+"""Longest time (seconds) a file read by `import_paths` waits for its commit."""
 
 
 @dataclass
 class FileResult:
     """The outcome of importing one file.
 
-    `status` is 'added', 'duplicate' (same content already stored) or 'failed'.
+    `status` is 'added', 'duplicate' (same content already stored) or 'failed' ('waiting'
+    while its commit is pending).
     `frames_in` counts the source file's frames, `frames_kept` the poses stored (per take,
     mirror not counted).
     """
@@ -58,43 +64,104 @@ def import_paths(
     mirror: bool = False,
     min_change: float = 0.0,
     progress: bool | None = None,
+    commit_files: int = COMMIT_FILES,
+    commit_seconds: float = COMMIT_SECONDS,
 ) -> list[FileResult]:
-    """Import every file (folders are searched for .bvh files) into `store`.
+    """Import every file (folders are searched for .bvh files) into `store`; one result
+    per file, in order.
 
-    Each file commits on its own, so a bad file or an interruption loses nothing already
-    imported; the index is rebuilt once at the end. A store whose catalog or pose data is
-    damaged (`PoseStore.check_catalog`, `check_poses`) raises StoreError before anything
-    is written. `progress` None shows a bar on a terminal only.
+    Files are read one by one and their takes committed in groups (`PoseStore.add_many`):
+    once `commit_files` are waiting or the first of them has waited `commit_seconds`.
+    A bad file fails alone; an interruption (or a crash) loses at most the files not
+    yet committed, and the store always holds whole files. A file whose content is
+    already stored, or comes in an earlier file, is a duplicate. The index is rebuilt
+    once at the end. A store whose catalog or pose data is damaged
+    (`PoseStore.check_catalog`, `check_poses`) raises StoreError before anything is
+    written. `progress` None shows a bar on a terminal only.
     """
-    results: list[FileResult] = []
     files = expand_paths(paths)
     store.check_catalog()  # nothing goes into a damaged store
     store.check_poses()
+    results: list[FileResult] = []
+    group = _CommitGroup(store, mirror, min_change, results)
     bar = tqdm(files, unit="file", disable=None if progress is None else not progress)
     for path in bar:
         bar.set_postfix_str(path.name, refresh=False)
         try:
             take = _load_take(path, options)
-            added = store.add(take, mirror=mirror, min_change=min_change, build_index=False)
+            check_addable(take)
         except SambaError as exc:
             results.append(FileResult(str(path), "failed", error=str(exc)))
             continue
-        status = "duplicate" if added.duplicate_of is not None else "added"
-        ids = (added.duplicate_of,) if added.duplicate_of is not None else added.take_ids
-        results.append(
-            FileResult(
-                str(path),
-                status,
-                frames_in=take.source_frames,
-                frames_kept=added.frames_kept,
-                rig=take.rig,
-                take_ids=ids,
-                warnings=list(take.warnings),
-            )
-        )
+        group.hold(path, take)
+        if len(group) >= commit_files or group.waited() >= commit_seconds:
+            group.commit()
+    group.commit()
     if any(r.status == "added" for r in results):
         store.build_index()
     return results
+
+
+class _CommitGroup:
+    """Takes read from files, waiting to be committed together; each has its place in
+    `results`, filled in by `commit`."""
+
+    def __init__(
+        self, store: PoseStore, mirror: bool, min_change: float, results: list[FileResult]
+    ) -> None:
+        self.store = store
+        self.mirror = mirror
+        self.min_change = min_change
+        self.results = results
+        self.waiting: list[tuple[int, Take]] = []
+        self.since = 0.0
+
+    def __len__(self) -> int:
+        return len(self.waiting)
+
+    def hold(self, path: Path, take: Take) -> None:
+        """Queue `take`, read from `path`, with a place in the results."""
+        if not self.waiting:
+            self.since = time.monotonic()
+        self.waiting.append((len(self.results), take))
+        self.results.append(FileResult(str(path), "waiting"))
+
+    def waited(self) -> float:
+        """Seconds since the first waiting take was queued (0 when none waits)."""
+        return time.monotonic() - self.since if self.waiting else 0.0
+
+    def commit(self) -> None:
+        """Add the waiting takes in one commit and fill in their results; a store error
+        fails each of them with it."""
+        if not self.waiting:
+            return
+        takes = [take for _, take in self.waiting]
+        try:
+            added = self.store.add_many(
+                takes, mirror=self.mirror, min_change=self.min_change, build_index=False
+            )
+        except SambaError as exc:
+            for place, _ in self.waiting:
+                self.results[place] = FileResult(self.results[place].path, "failed", error=str(exc))
+        else:
+            for (place, take), result in zip(self.waiting, added, strict=True):
+                self.results[place] = _file_result(self.results[place].path, take, result)
+        self.waiting = []
+
+
+def _file_result(path: str, take: Take, added: AddResult) -> FileResult:
+    """What became of the file at `path`, read as `take`, that the store added (or found
+    a duplicate of) as `added`."""
+    duplicate = added.duplicate_of is not None
+    return FileResult(
+        path,
+        "duplicate" if duplicate else "added",
+        frames_in=take.source_frames,
+        frames_kept=added.frames_kept,
+        rig=take.rig,
+        take_ids=(added.duplicate_of,) if duplicate else added.take_ids,
+        warnings=list(take.warnings),
+    )
 
 
 def _load_take(path: Path, options: BvhImportOptions | None) -> Take:

@@ -17,10 +17,12 @@ import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from types import ModuleType
 from typing import NoReturn
 
 import numpy as np
 
+from samba.base import KernelSet, kernels_enabled
 from samba.body import euler_to_quaternions, forward_kinematics, whole_fps
 from samba.ingest.errors import BvhError
 from samba.ingest.resolver import SkeletonTree
@@ -29,7 +31,15 @@ _CHANNELS = {f"{axis}{kind}": (kind, axis) for axis in "XYZ" for kind in ("posit
 _TOKEN = re.compile(r"[{}]|[^\s{}]+")
 _LONE_CR = re.compile(r"\r(?!\n)")
 _MOTION = re.compile(r"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE | re.IGNORECASE)
+_MOTION_BYTES = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE | re.IGNORECASE)
+_HEAD_WINDOW = 4096
+"""Bytes after the MOTION line in which `_parse_plain` looks for 'Frames:' and 'Frame
+Time:' (the full path reads files that put them further)."""
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+_INEXACT_SHARE = 8
+"""The reader's kernel leaves at most one number in this many to Python's `float` (more
+than 15 significant digits, or beyond 10^22 either way: a Daz export writes two such in
+every frame, 3.88251e-19) before it hands the file to `np.loadtxt`."""
 
 
 @dataclass(frozen=True)
@@ -148,6 +158,9 @@ def read_bvh(path: str | Path) -> BvhFile:
 def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
     """Parse BVH text (bytes or str); `source` names it in error messages."""
     if isinstance(data, bytes):
+        plain = _parse_plain(data, source)
+        if plain is not None:
+            return plain
         if b"\x00" in data:
             line = _byte_line(data, data.index(b"\x00"))
             raise BvhError(source, "binary data, not a BVH text file", line)
@@ -178,6 +191,36 @@ def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
     )
     motion_data = _parse_frames(text[offset:], first_line, frames, n_channels, source)
     return BvhFile(source=source, joints=joints, frame_time=frame_time, motion=motion_data)
+
+
+def _parse_plain(data: bytes, source: str) -> BvhFile | None:
+    """`data` parsed without decoding or copying its motion section, for the usual file:
+    ASCII, LF or CRLF line ends, a sound hierarchy and header, frames of plain numbers
+    that the compiled reader reads (`_read_table`). None for anything else, which
+    `parse_bvh`'s full path then parses or names the problem of (with the line)."""
+    if not kernels_enabled() or not data.isascii():
+        return None
+    motion = _MOTION_BYTES.search(data)
+    if motion is None:
+        return None
+    head = data[: motion.end() + _HEAD_WINDOW].decode("ascii")
+    if head.count("\r") != head.count("\r\n"):
+        return None  # a lone CR ends a line: the full path rewrites them
+    try:
+        joints = _hierarchy(head[: motion.start()], source)
+        motion_line = head.count("\n", 0, motion.start()) + 1
+        frames, frame_time, offset, _ = _parse_motion_header(
+            head, motion.end(), motion_line, source
+        )
+    except BvhError:
+        return None
+    if offset >= len(head) and len(head) < len(data):
+        return None  # 'Frame Time:' may go on past the window
+    n_channels = sum(len(j.channels) for j in joints)
+    table = _read_table(np.frombuffer(data, dtype=np.uint8, offset=offset), frames, n_channels)
+    if table is None or table.shape != (frames, n_channels) or not np.isfinite(table).all():
+        return None
+    return BvhFile(source=source, joints=joints, frame_time=frame_time, motion=table)
 
 
 def _hierarchy(header: str, source: str) -> tuple[BvhJoint, ...]:
@@ -367,19 +410,72 @@ def _parse_motion_header(
 def _parse_frames(
     body: str, first_line: int, frames: int, n_channels: int, source: str
 ) -> np.ndarray:
-    """The (frames, n_channels) motion array from the data lines starting at `first_line`."""
-    motion = _read_numbers(body) if n_channels else None
+    """The (frames, n_channels) motion array from the data lines starting at `first_line`:
+    read by the compiled reader, or else by `np.loadtxt`, or else diagnosed."""
+    motion = None
+    if n_channels:
+        buffer = np.frombuffer(body.encode("utf-8"), dtype=np.uint8)
+        motion = _read_table(buffer, frames, n_channels)
+        if motion is None:
+            motion = _read_numbers(body)
     if motion is None or motion.shape != (frames, n_channels) or not np.isfinite(motion).all():
         _diagnose_frames(body.split("\n"), first_line, frames, n_channels, source)
     return motion
 
 
+def _read_table(buffer: np.ndarray, frames: int, n_columns: int) -> np.ndarray | None:
+    """The (rows, n_columns) float64 table of plain decimal numbers in `buffer` (uint8
+    bytes), one row per non-blank line, read by the compiled kernel
+    (`samba.ingest.kernels`): the same floats as `np.loadtxt`. None when the kernel is off
+    or the text is anything else (NaN, a word, a short row, more than `frames` rows): the
+    caller then reads it with `_read_numbers` and diagnoses it."""
+    if not kernels_enabled():
+        return None
+    kernels = _kernels()
+    kernels.KERNELS.warm_up()
+    most_inexact = 64 + frames * n_columns // _INEXACT_SHARE
+    status, rows, values, inexact = kernels.motion_table_kernel(
+        buffer, n_columns, frames, most_inexact
+    )
+    if status != kernels.READ:
+        return None
+    if len(inexact):
+        _convert_inexact(buffer, values, inexact)
+    return values[: rows * n_columns].reshape(rows, n_columns)
+
+
+def _convert_inexact(buffer: np.ndarray, values: np.ndarray, inexact: np.ndarray) -> None:
+    """Set the numbers the kernel left, `inexact` (k, 3) rows of (slot in `values`, first
+    and past-last byte in `buffer`), by Python's correctly rounded `float`, as
+    `np.loadtxt` reads them."""
+    converted: dict[bytes, float] = {}
+    for slot, start, end in inexact.tolist():
+        token = buffer[start:end].tobytes()
+        value = converted.get(token)
+        if value is None:
+            value = converted[token] = float(token)
+        values[slot] = value
+
+
+def _kernels() -> ModuleType:
+    """`samba.ingest.kernels`, imported on first use: numba's import (0.2 s) stays off
+    commands that read no BVH."""
+    import samba.ingest.kernels as kernels
+
+    return kernels
+
+
+def reader_kernels() -> KernelSet:
+    """The BVH reader's compiled kernel (`samba.ingest.kernels.KERNELS`), for `samba
+    warmup`; importing it imports numba."""
+    return _kernels().KERNELS
+
+
 def _read_numbers(body: str) -> np.ndarray | None:
     """Whitespace-separated numbers, one row per non-blank line, as a (rows, columns)
     float64 array; None when the text does not read as such a table (a short row, a
-    word). Reads with `np.loadtxt`'s C parser: on the 49 shared CMU files 0.55 s against
-    0.79 s for pandas' `read_csv` and its DataFrame (pandas 3.1; equal to the bit), which
-    this used before."""
+    word). Reads with `np.loadtxt`'s C parser: the reference of `_read_table`, which
+    reads what it cannot (NaN, infinity, other number forms) and when kernels are off."""
     if not body.strip():  # loadtxt warns on empty input
         return None
     try:
