@@ -5,10 +5,12 @@
    viewer and control API on HTTP, VMC to `--vmc` (default the VMC marionette port
    39539, where VSeeFace / EVMC4U listen) and to a receiver of its own that counts what
    arrives.
-3. Two simulated camera nodes, each its own UDP socket, playing a held-out synthetic
-   motion (or `--motion FILE.bvh`, or the real markers of `--motion FILE.c3d`, see
-   `samba.service.marker_motion`) in real time: the markers projected into two 640x480
-   cameras with 0.3 px noise and 2% dropout, as a camera node's tracker reports them.
+3. Two simulated camera nodes, each its own UDP socket and its own key (drawn for the
+   run; the server checks each camera's packets with its node's key), playing a
+   held-out synthetic motion (or `--motion FILE.bvh`, or the real markers of `--motion
+   FILE.c3d`, see `samba.service.marker_motion`) in real time: the markers projected
+   into two 640x480 cameras with 0.3 px noise and 2% dropout, as a camera node's
+   tracker reports them.
 4. A take recorded while they play, then exported to USD and glTF on the default
    mannequin; a summary of frames, latency, accuracy against the truth (for a marker
    take, which has no true joints: how high the recorded shoulders went, beside the
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import secrets
 import sys
 import tempfile
 import time
@@ -33,6 +36,7 @@ from samba.db import PoseStore, build_synthetic_store
 from samba.export import Avatar, load_avatar, retarget, write_export
 from samba.ingest import BvhImportOptions, MarkerSet, load_bvh_take, read_take
 from samba.service.marker_motion import MarkerMotion, is_marker_file
+from samba.service.node_keys import NodeKey, NodeKeys
 from samba.service.serve import LiveServer
 from samba.service.session import CaptureSession
 from samba.service.session_config import SessionConfig
@@ -109,8 +113,18 @@ async def _demo(
         },
         "samba demo",
     )
+    node_keys = {camera: secrets.token_bytes(32) for camera in (0, 1)}
+    keys = NodeKeys(
+        NodeKey(key, frozenset({camera}), SESSION, f"demo node {camera}")
+        for camera, key in node_keys.items()
+    )
     live = LiveServer(
-        [config], folder / "takes", udp=("127.0.0.1", 0), http=("127.0.0.1", 0), workers=1
+        [config],
+        folder / "takes",
+        udp=("127.0.0.1", 0),
+        http=("127.0.0.1", 0),
+        keys=keys,
+        workers=1,
     )
     async with live:
         assert live.server is not None
@@ -131,7 +145,10 @@ async def _demo(
         start_at = time.time() + 0.5
         counter.start()
         await asyncio.gather(
-            *(play(capture, live.udp_address, start_at, SESSION, cameras=[c]) for c in (0, 1))
+            *(
+                play(capture, live.udp_address, start_at, SESSION, key, cameras=[camera])
+                for camera, key in node_keys.items()
+            )
         )
         deadline = time.time() + DRAIN_S
         while not _all_out(session, capture.frames) and time.time() < deadline:

@@ -21,6 +21,7 @@ class PacketError(InputError):
         "unsupported version",
         "bad length",
         "missing tag",
+        "no key",
         "bad tag",
         "unexpected tag",
         "bad values",

@@ -39,15 +39,13 @@ the clock estimate moved, or packets crowded between two frames, while the frame
 open) is late and removed first, which keeps emitted times strictly increasing.
 
 Duplicates and restarts. The last `RECENT_PACKETS` (sequence, timestamp) pairs of each
-camera identify duplicates, even of packets whose frame is already out. A camera has
-restarted when a packet has the sequence of a recent one but another timestamp, or an
-older sequence (`sequence_delta`) with a timestamp newer than the camera's newest packet
-(the last one whose sequence and timestamp were both ahead). Its recent pairs and clock
-window are then forgotten and the packet is used as usual. A camera that pauses and
-continues (sequence and timestamp both ahead) has not restarted. A node that restarts
-with its clock set back, beyond the recent pairs, looks like a stream of stale packets
-(as a replay would): they are late until its old clock samples leave the window, after
-which its packets are grouped again.
+camera identify duplicates, even of packets whose frame is already out; a packet with
+the sequence of a recent one but another timestamp is a conflict and dropped. Sequence
+numbers alone never make a restart: the caller says when a camera restarted
+(`restart`: the server's replay guard saw the node's new epoch,
+`samba.service.replay_guard`), and its recent pairs and clock window are forgotten, so
+its next packet is grouped at once whatever its sequence and clock. A camera that
+pauses and continues has not restarted.
 """
 
 from __future__ import annotations
@@ -59,7 +57,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 
-from samba.service.packet import Packet, sequence_delta
+from samba.service.packet import Packet
 
 RECENT_PACKETS = 256
 """(sequence, timestamp) pairs remembered per camera to spot duplicates and restarts."""
@@ -90,7 +88,7 @@ class SyncCounts:
 
     Every packet offered is a member of an emitted frame, of a skipped frame or of a
     frame still open, or was dropped as a duplicate, late, a conflict or of an unknown
-    camera. `restarts` counts camera restarts (those packets are still used).
+    camera. `restarts` counts the cameras' restarts (`FrameSync.restart`).
     """
 
     packets: int = 0
@@ -120,36 +118,22 @@ class _OpenFrame:
 
 
 class _Camera:
-    """One camera's recent (sequence, timestamp) pairs, newest packet and clock window."""
+    """One camera's recent (sequence, timestamp) pairs and clock window."""
 
     def __init__(self) -> None:
         self.recent: OrderedDict[int, float] = OrderedDict()
-        self.newest: tuple[int, float] | None = None
         self.clock: deque[tuple[float, float]] = deque()
-
-    def went_back(self, packet: Packet) -> bool:
-        """Whether the sequence is older than the newest packet's but the timestamp newer."""
-        if self.newest is None:
-            return False
-        sequence, timestamp = self.newest
-        return sequence_delta(packet.sequence, sequence) < 0 and packet.timestamp > timestamp
 
     def forget(self) -> None:
         """Drop the history and clock window, as after a restart."""
         self.recent.clear()
-        self.newest = None
         self.clock.clear()
 
     def remember(self, packet: Packet) -> None:
-        """Record the packet's (sequence, timestamp); it is the newest if both are ahead."""
+        """Record the packet's (sequence, timestamp)."""
         self.recent[packet.sequence] = packet.timestamp
         if len(self.recent) > RECENT_PACKETS:
             self.recent.popitem(last=False)
-        newest = self.newest
-        if newest is None or (
-            sequence_delta(packet.sequence, newest[0]) > 0 and packet.timestamp > newest[1]
-        ):
-            self.newest = (packet.sequence, packet.timestamp)
 
     def offset(self, timestamp: float, arrival: float, window_s: float) -> float:
         """Add the sample `arrival - timestamp` (s) and return the window's minimum (s)."""
@@ -233,18 +217,27 @@ class FrameSync:
             counts.unknown_camera += 1
             return []
         seen = camera.recent.get(packet.sequence)
-        if seen == packet.timestamp:
-            counts.duplicates += 1
+        if seen is not None:
+            if seen == packet.timestamp:
+                counts.duplicates += 1
+            else:
+                counts.conflicts += 1
             return []
-        if seen is not None or camera.went_back(packet):
-            counts.restarts += 1
-            camera.forget()
         camera.remember(packet)
         aligned = packet.timestamp + camera.offset(packet.timestamp, arrival, self._clock_window_s)
         if aligned <= self._last_time + self._tolerance_s:
             counts.late += 1
             return []
         return self._place(_Member(packet, aligned, arrival))
+
+    def restart(self, camera: int) -> None:
+        """Camera `camera`'s node has restarted: forget its recent packets and clock
+        window (its next packet is grouped at once) and count it. An id that is not one
+        of the cameras is ignored (its packets count as unknown)."""
+        state = self._cameras.get(camera)
+        if state is not None:
+            state.forget()
+            self.counts.restarts += 1
 
     def expire(self, now: float) -> list[SyncedFrame]:
         """Resolve the frames whose first packet arrived at or before `now - wait_s`.

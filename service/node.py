@@ -54,7 +54,7 @@ from samba.markers import (
     standing_lead_in,
     static_mask,
 )
-from samba.service.packet import MAX_BLOBS, MarkerPacket, PosePacket, encode
+from samba.service.packet import MAX_BLOBS, MarkerPacket, PosePacket, encode, random_epoch
 from samba.synthetic import generate
 
 DEFAULT_PORT = 9870
@@ -180,11 +180,12 @@ class CameraNode:
 class PacketSender:
     """A UDP socket sending each frame's markers to the server as one `MarkerPacket`.
 
-    `host`, `port`: the server; `camera` 0..65535 and `session` go into every packet;
-    `key` (None: unsigned) signs them with an HMAC tag. A send that fails (server not
-    listening, network unreachable, buffer full) is counted in `errors` and never
-    raises. InputError when `host` cannot be resolved; ValueError for a bad camera or
-    session (see `MarkerPacket`). Use as a context manager or call `close`.
+    `host`, `port`: the server; `camera` 0..65535 and `session` go into every packet,
+    with the sender's `epoch`, drawn at random when it is made (`new_epoch` draws
+    another); `key` (None: unsigned) signs them with an HMAC tag. A send that fails
+    (server not listening, network unreachable, buffer full) is counted in `errors`
+    and never raises. InputError when `host` cannot be resolved; ValueError for a bad
+    camera or session (see `MarkerPacket`). Use as a context manager or call `close`.
     """
 
     def __init__(
@@ -192,6 +193,8 @@ class PacketSender:
     ) -> None:
         MarkerPacket(camera, 0, 0.0, np.full((N_MARKERS, 2), np.nan), session)  # validates
         self.camera, self.session, self.key = camera, session, key
+        self.epoch = random_epoch()
+        """The epoch put in every packet: this run of the node."""
         self.sent = 0
         """Packets handed to the network."""
         self.errors = 0
@@ -213,6 +216,10 @@ class PacketSender:
             self._socket.close()
             raise InputError(f"{host}:{port}", f"cannot reach the server: {exc}") from None
 
+    def new_epoch(self) -> None:
+        """Draw a new epoch for the packets from now on (before the sequence wraps)."""
+        self.epoch = random_epoch()
+
     def send(
         self,
         sequence: int,
@@ -229,10 +236,12 @@ class PacketSender:
         if np.shape(values) == (N_JOINTS, 3):
             if blobs is not None and len(blobs):
                 raise ValueError("a pose packet carries no blobs")
-            packet: MarkerPacket | PosePacket = PosePacket(*header, values, self.session)
+            packet: MarkerPacket | PosePacket = PosePacket(
+                *header, values, self.session, self.epoch
+            )
         else:
             extra = np.zeros((0, 2)) if blobs is None else blobs
-            packet = MarkerPacket(*header, values, self.session, extra)
+            packet = MarkerPacket(*header, values, self.session, extra, self.epoch)
         data = encode(packet, self.key)
         try:
             sent = self._socket.send(data)
@@ -472,7 +481,8 @@ def run_node(
 
     `node` is a `CameraNode` (markers) or a `samba.service.silhouette_node.SilhouetteNode`
     (poses; a frame it has no pose for yet is counted, not sent). Packets carry
-    sequence numbers from `start_sequence`, one per frame, wrapping from 2^32 - 1 to 0.
+    sequence numbers from `start_sequence`, one per frame, wrapping from 2^32 - 1 to 0,
+    where the sender draws a new epoch (the sequence only increases within one).
     The node's tracker restarts on every capture marked `first`. With a
     `status` stream, a one-line status goes there every `STATUS_SECONDS`. InputError
     from the feed or the frames (wrong size, unreadable) propagates.
@@ -491,6 +501,8 @@ def run_node(
                 sender.send(sequence, capture.timestamp, values, node.unlabelled())
             tally.count(values, capture.deadline)
             sequence = (sequence + 1) % _SEQUENCE_MODULUS
+            if sequence == 0:
+                sender.new_epoch()
             if status is not None and tally.status_due():
                 print(tally.status_line(), file=status, flush=True)
     except KeyboardInterrupt:

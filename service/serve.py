@@ -7,7 +7,9 @@ late cameras ran out. The frames are computed in `workers` worker processes
 results come back to the loop, which records them and feeds the viewer.
 The HTTP side (aiohttp) serves the control API (`samba.service.control_api`) and the live
 viewer (`samba.service.viewer`) on one port. The API is bound to 127.0.0.1 by default;
-binding it to any other address requires a token.
+binding it to any other address requires a token. Likewise the UDP input: binding it
+beyond loopback requires the nodes' keys (`samba.service.node_keys`), since an
+unsigned packet could come from anyone on the network.
 """
 
 from __future__ import annotations
@@ -27,7 +29,9 @@ from aiohttp import web
 from samba.cameras import read_calibration
 from samba.service.control_api import add_control_routes, token_middleware
 from samba.service.errors import ServiceError
+from samba.service.node_keys import NodeKeys
 from samba.service.pipeline_workers import FrameDone, WorkerPipelines
+from samba.service.replay_guard import DEFAULT_MAX_SKEW_S
 from samba.service.server import CaptureServer
 from samba.service.session import CaptureSession
 from samba.service.session_config import SessionConfig
@@ -84,9 +88,11 @@ class LiveServer:
 
     `udp` and `http` are (host, port) to bind (port 0: any free port; `http=None`: no
     HTTP side). `token` protects the HTTP side and is required unless `http` is a
-    loopback address; `key` is the camera nodes' shared HMAC key; `workers` the number
-    of worker processes computing frames (0: in the event loop). `ServiceError` for a
-    missing token; session files are opened by `start`.
+    loopback address; `keys` are the camera nodes' keys, required unless `udp` is a
+    loopback address; `max_skew_s` how far (s) a packet's timestamp may be from the
+    server's clock; `workers` the number of worker processes computing frames (0: in the
+    event loop). `ServiceError` for a missing token or keys; session files are opened
+    by `start`.
     """
 
     def __init__(
@@ -97,7 +103,8 @@ class LiveServer:
         udp: tuple[str, int] = ("127.0.0.1", UDP_PORT),
         http: tuple[str, int] | None = ("127.0.0.1", HTTP_PORT),
         token: str | None = None,
-        key: bytes | None = None,
+        keys: NodeKeys | None = None,
+        max_skew_s: float = DEFAULT_MAX_SKEW_S,
         workers: int = 0,
     ) -> None:
         if http is not None and token is None and not is_loopback(http[0]):
@@ -106,12 +113,19 @@ class LiveServer:
                 "the control API is bound beyond this machine: give a token (--token or "
                 "$SAMBA_TOKEN), or bind it to 127.0.0.1",
             )
+        if keys is None and not is_loopback(udp[0]):
+            raise ServiceError(
+                f"udp {udp[0]}:{udp[1]}",
+                "camera packets are received beyond this machine: give the nodes' keys "
+                "(--keys FILE), or bind --udp to 127.0.0.1",
+            )
         self._configs = list(configs)
         self._takes_dir = Path(takes_dir)
         self._udp_bind = udp
         self._http_bind = http
         self._token = token
-        self._key = key
+        self._keys = keys
+        self._max_skew_s = max_skew_s
         self._workers = workers
         self.hub = ViewerHub()
         self.server: CaptureServer | None = None
@@ -137,7 +151,13 @@ class LiveServer:
 
         pipelines = WorkerPipelines(self._workers, deliver) if self._workers else None
         self.server = await asyncio.to_thread(
-            CaptureServer, self._configs, self._takes_dir, self._key, self.hub, pipelines
+            CaptureServer,
+            self._configs,
+            self._takes_dir,
+            self._keys,
+            self.hub,
+            pipelines,
+            self._max_skew_s,
         )
         try:
             try:

@@ -2,11 +2,13 @@
 
 No sockets here (`samba.service.udp_input` reads them, `samba.service.serve` runs everything):
 `receive` takes one datagram with the wall-clock time it arrived, decodes it
-(`samba.service.packet.decode`, with the shared key when one is set) and hands the packet to
-the session its session id names — or, when the id is empty, to the only session. A
-datagram that is dropped is counted by reason: a `PacketError` reason, "unknown
-session", or "wrong input" (marker packets to a poses session, or the other way round).
-Nothing a sender does raises out of `receive`.
+(`samba.service.packet.decode`; with node keys, checked with the key listed for the
+packet's session and camera) and hands the packet to the session its session id names
+— or, when the id is empty, to the only session — whose replay guard admits it or not
+(`samba.service.replay_guard`). A datagram that is dropped is counted by reason: a
+`PacketError` reason, "unknown session", "wrong input" (marker packets to a poses
+session, or the other way round), or the replay guard's ("duplicate", "replayed", "off
+clock"). Nothing a sender does raises out of `receive`.
 
 The sessions' frames are computed by `pipelines` (`samba.service.pipeline_workers`; by
 default `InlinePipelines`, in the caller's thread); whatever runs them hands each
@@ -22,8 +24,10 @@ from pathlib import Path
 from typing import Any
 
 from samba.service.errors import PacketError, ServiceError
+from samba.service.node_keys import NodeKeys
 from samba.service.packet import decode
 from samba.service.pipeline_workers import FrameDone, InlinePipelines
+from samba.service.replay_guard import DEFAULT_MAX_SKEW_S
 from samba.service.session import CaptureSession, Pipelines
 from samba.service.session_config import SessionConfig
 from samba.service.viewer import ViewerHub
@@ -37,22 +41,25 @@ WRONG_INPUT = "wrong input"
 class CaptureServer:
     """The sessions of a server; see the module docstring.
 
-    `takes_dir`: folder of recorded takes (a sub-folder per session). `key`: the shared
-    secret camera nodes sign packets with (None: packets must be unsigned).
-    `viewer`: where sessions send frames for the live viewer. `pipelines`: where the
-    frames are computed, created with `deliver` as its callback (None: inline).
+    `takes_dir`: folder of recorded takes (a sub-folder per session). `keys`: the keys
+    camera nodes sign packets with, by session and camera (None: packets must be
+    unsigned). `viewer`: where sessions send frames for the live viewer. `pipelines`:
+    where the frames are computed, created with `deliver` as its callback (None:
+    inline). `max_skew_s`: how far (s) a packet's timestamp may be from its arrival.
     """
 
     def __init__(
         self,
         configs: Iterable[SessionConfig],
         takes_dir: str | Path,
-        key: bytes | None = None,
+        keys: NodeKeys | None = None,
         viewer: ViewerHub | None = None,
         pipelines: Pipelines | None = None,
+        max_skew_s: float = DEFAULT_MAX_SKEW_S,
     ) -> None:
         self.takes_dir = Path(takes_dir)
-        self.key = key
+        self.keys = keys
+        self.max_skew_s = max_skew_s
         self._viewer = viewer
         self.pipelines = InlinePipelines(self.deliver) if pipelines is None else pipelines
         self.sessions: dict[str, CaptureSession] = {}
@@ -74,7 +81,9 @@ class CaptureServer:
         so a caller may run it in a worker thread (loading a large database takes a
         while). `ServiceError` if the name is taken, or as `CaptureSession` raises."""
         self._check_free(config.name)
-        return CaptureSession(config, self.takes_dir / config.name, self.pipelines, self._viewer)
+        return CaptureSession(
+            config, self.takes_dir / config.name, self.pipelines, self._viewer, self.max_skew_s
+        )
 
     def attach(self, session: CaptureSession) -> CaptureSession:
         """Start routing packets to an opened session; `ServiceError` (and the session is
@@ -106,21 +115,35 @@ class CaptureServer:
     def receive(self, data: bytes, arrival: float, sender: str = "packet") -> None:
         """Handle one datagram from `sender` that arrived at `arrival` (s, wall clock)."""
         self.datagrams += 1
+        key_for = None if self.keys is None else self._key_for
         try:
-            packet = decode(data, self.key, source=sender)
+            packet = decode(data, source=sender, key_for=key_for)
         except PacketError as exc:
             self.drops[exc.reason] += 1
             return
-        session = self.sessions.get(packet.session)
-        if session is None and packet.session == "" and len(self.sessions) == 1:
-            session = next(iter(self.sessions.values()))
+        session = self._route(packet.session)
         if session is None:
             self.drops[UNKNOWN_SESSION] += 1
             return
         if not session.accepts(packet):
             self.drops[WRONG_INPUT] += 1
             return
-        session.on_packet(packet, arrival)
+        verdict = session.on_packet(packet, arrival)
+        if not verdict.accepted:
+            self.drops[verdict.value] += 1
+
+    def _route(self, session_id: str) -> CaptureSession | None:
+        """The session a packet's session id names; an empty id names the only session."""
+        session = self.sessions.get(session_id)
+        if session is None and session_id == "" and len(self.sessions) == 1:
+            session = next(iter(self.sessions.values()))
+        return session
+
+    def _key_for(self, session_id: str, camera: int) -> bytes | None:
+        """The key that may speak for `camera` of the session a packet's id routes to."""
+        assert self.keys is not None
+        session = self._route(session_id)
+        return None if session is None else self.keys.key_for(session.name, camera)
 
     def together(self) -> AbstractContextManager[None]:
         """A block whose completed frames are computed together at its end (frames of

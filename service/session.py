@@ -1,6 +1,9 @@
 """`CaptureSession`: one subject's live capture, from camera packets to avatar poses.
 
-Per frame assembled by `FrameSync` (one packet per camera, or at least `min_cameras`
+Each packet first passes the session's `ReplayGuard` (new, not a copy, on the server's
+clock; a node's new epoch restarts its camera in the frame sync), and a marker packet
+loses the markers and blobs outside its camera's image (`keep_inside`, counted). Per
+frame assembled by `FrameSync` (one packet per camera, or at least `min_cameras`
 after waiting `wait_ms`), the session hands the cameras' marker pixels, labelled and
 unlabelled (`CameraMarkers`), to its `FramePipeline` (labelling, triangulation,
 reconstruction, retargeting, VMC out; in the event loop
@@ -33,8 +36,10 @@ from samba.cameras import read_calibration
 from samba.service.errors import ServiceError
 from samba.service.frame_pipeline import CameraMarkers, FrameInput, FrameOutput
 from samba.service.frame_sync import FrameSync, SyncedFrame
+from samba.service.image_bounds import keep_inside
 from samba.service.metrics import LabelCounts, LatencyWindow
-from samba.service.packet import Packet, PosePacket
+from samba.service.packet import MarkerPacket, Packet, PosePacket
+from samba.service.replay_guard import DEFAULT_MAX_SKEW_S, ReplayGuard, Verdict
 from samba.service.session_config import SessionConfig
 from samba.service.take_recorder import TakeRecorder
 from samba.service.viewer import ViewerHub, frame_message
@@ -89,7 +94,8 @@ class CaptureSession:
     Reads the calibration and opens the session's pipeline in `pipelines` (which opens
     the pose database read only and the VMC socket); raises `ServiceError` /
     `InputError` naming the file when one cannot be used. `takes_dir` is where
-    `start_take` writes; frames go to `viewer` while the session has viewer clients.
+    `start_take` writes; frames go to `viewer` while the session has viewer clients;
+    `max_skew_s` is the replay guard's window around the server clock (s).
     """
 
     def __init__(
@@ -98,6 +104,7 @@ class CaptureSession:
         takes_dir: str | Path,
         pipelines: Pipelines,
         viewer: ViewerHub | None = None,
+        max_skew_s: float = DEFAULT_MAX_SKEW_S,
     ) -> None:
         self.config = config
         self.takes_dir = Path(takes_dir)
@@ -120,6 +127,9 @@ class CaptureSession:
             wait_s=config.wait_ms / 1e3,
             min_cameras=1 if self.poses else config.min_cameras,  # poses: the one node
         )
+        self.guard = ReplayGuard(max_skew_s)
+        self.markers_outside = 0
+        self.blobs_outside = 0
         self.latency = LatencyWindow()
         self.labels = LabelCounts()
         self.frames_out = 0
@@ -140,13 +150,30 @@ class CaptureSession:
         """Whether `packet` is of the kind this session's nodes send (`input`)."""
         return isinstance(packet, PosePacket) == self.poses
 
-    def on_packet(self, packet: Packet, arrival: float) -> None:
+    def on_packet(self, packet: Packet, arrival: float) -> Verdict:
         """Take one decoded packet of the kind the session `accepts`, that arrived at
-        `arrival` (s), and submit the frames it completes or pushes out."""
+        `arrival` (UNIX seconds), and submit the frames it completes or pushes out.
+        Returns the replay guard's verdict: a packet it drops changes nothing else."""
+        verdict = self.guard.check(packet, arrival)
+        if not verdict.accepted:
+            return verdict
         if isinstance(packet, PosePacket):
             packet = replace(packet, camera=0)  # one node: its camera id is informative
+        elif self.cameras is not None and packet.camera < len(self.cameras):
+            packet = self._inside(packet)
+        if verdict is Verdict.RESTART:
+            self.sync.restart(packet.camera)
         for frame in self.sync.add(packet, arrival):
             self._submit(frame)
+        return verdict
+
+    def _inside(self, packet: MarkerPacket) -> MarkerPacket:
+        """`packet` without the markers and blobs outside its camera's image, counted."""
+        assert self.cameras is not None
+        packet, markers, blobs = keep_inside(packet, self.cameras[packet.camera])
+        self.markers_outside += markers
+        self.blobs_outside += blobs
+        return packet
 
     def on_timer(self, now: float) -> None:
         """Submit the frames whose wait for late cameras has run out at `now` (s)."""
@@ -304,6 +331,7 @@ class CaptureSession:
             "frames_failed": self.frames_failed,
             "frames_in_flight": len(self._in_flight),
             "sync": dict(vars(counts)),
+            "outside_image": {"markers": self.markers_outside, "blobs": self.blobs_outside},
             "labels": None if self.poses else self.labels.summary(),
             "latency": self.latency.summary(),
             "vmc_send_errors": self.vmc_errors,

@@ -5,7 +5,7 @@ A session comes from `samba serve` flags, from a `[[session]]` table of a TOML f
 
 | key | type | default | meaning |
 |---|---|---|---|
-| `name` | string | (required) | session id: 1..16 of `[A-Za-z0-9._-]`, as camera nodes send it |
+| `name` | string | (required) | session id: 1..16 of `[A-Za-z0-9._-]`, first a letter or digit |
 | `input` | string | `"markers"` | what nodes send: `"markers"` or `"poses"` (see below) |
 | `calibration` | path | (markers) | camera calibration TOML; camera id n = the n-th camera table |
 | `database` | path | (markers) | pose store directory (`samba db init` / `import`) |
@@ -56,8 +56,9 @@ from samba.base import address
 from samba.reconstruct import METHODS
 from samba.service.errors import ServiceError
 
-SESSION_NAME = re.compile(r"[A-Za-z0-9._-]{1,16}")
-"""A session's name: what camera nodes put in their packets' session field."""
+SESSION_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,15}")
+"""A session's name: what camera nodes put in their packets' session field, and the
+folder of its takes (so never `.`, `..` or hidden)."""
 
 INPUTS = ("markers", "poses")
 """What a session's camera nodes send (`input`)."""
@@ -132,7 +133,9 @@ class SessionConfig:
             )
         name = _string(values, "name", source)
         if not SESSION_NAME.fullmatch(name):
-            raise ServiceError(source, f"name {name!r} is not 1..16 of [A-Za-z0-9._-]")
+            raise ServiceError(
+                source, f"name {name!r} is not 1..16 of [A-Za-z0-9._-], the first a letter or digit"
+            )
         where = f"{source}: session {name!r}"
         method = _string(values, "method", where, "samba")
         if method not in METHODS:

@@ -27,7 +27,7 @@ from samba.body import Take, markers_of
 from samba.cameras import CameraGroup
 from samba.markers import spread_cameras
 from samba.service.marker_motion import marker_poses
-from samba.service.packet import MarkerPacket, encode
+from samba.service.packet import MarkerPacket, encode, random_epoch
 from samba.synthetic import generate
 
 
@@ -113,16 +113,23 @@ class SyntheticCapture:
         return len(self.markers)
 
     def packet(
-        self, camera: int, frame: int, start_at: float, session: str = "", sequence0: int = 0
+        self,
+        camera: int,
+        frame: int,
+        start_at: float,
+        session: str = "",
+        sequence0: int = 0,
+        epoch: int = 0,
     ) -> MarkerPacket:
-        """Camera `camera`'s packet of frame `frame` (sequence `sequence0 + frame`),
-        captured at `start_at + frame / fps` seconds."""
+        """Camera `camera`'s packet of frame `frame` (sequence `sequence0 + frame`, in
+        `epoch`), captured at `start_at + frame / fps` seconds."""
         return MarkerPacket(
             camera=camera,
             sequence=(sequence0 + frame) % 2**32,
             timestamp=start_at + frame / self.fps,
             markers=self.pixels[camera, frame],
             session=session,
+            epoch=epoch,
         )
 
 
@@ -136,16 +143,20 @@ async def play(
     frames: range | None = None,
     sequence0: int = 0,
     sent: Callable[[int, float], None] | None = None,
+    epoch: int | None = None,
 ) -> int:
     """Send `capture` to `address` in real time: every frame's packets (of `cameras`,
     default all, in camera order) at its capture time `start_at + i / fps` (wall clock,
     seconds), over `frames` (default all), frame i with sequence `sequence0 + i` (a
-    restarted node: a negative `sequence0` so it counts from 0 again). `sent(frame, t)`
-    is called after a frame's last packet left at wall-clock time t. Returns the number
-    of datagrams sent (a datagram the socket buffer cannot take is not sent).
+    restarted node: a negative `sequence0` so it counts from 0 again), signed with `key`
+    when given. Every call is one run of the cameras' nodes: its packets carry `epoch`,
+    drawn at random when None. `sent(frame, t)` is called after a frame's last packet
+    left at wall-clock time t. Returns the number of datagrams sent (a datagram the
+    socket buffer cannot take is not sent).
     """
     ids = list(range(len(capture.cameras))) if cameras is None else list(cameras)
     frames = range(capture.frames) if frames is None else frames
+    epoch = random_epoch() if epoch is None else epoch
     count = 0
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.setblocking(False)
@@ -155,7 +166,8 @@ async def play(
             if delay > 0:
                 await asyncio.sleep(delay)
             for camera in ids:
-                data = encode(capture.packet(camera, frame, start_at, session, sequence0), key)
+                packet = capture.packet(camera, frame, start_at, session, sequence0, epoch)
+                data = encode(packet, key)
                 try:
                     sock.sendto(data, address)
                     count += 1

@@ -2,7 +2,8 @@
 
 Arrival times are passed explicitly (server seconds); nothing sleeps. Helpers build the
 deliveries of cameras at 60 fps, send them in arrival order like the server would (expire
-before each add, a final expire) and collect the emitted frames.
+before each add, a final expire; a camera's first packet of an epoch it has not sent
+before restarts it, as the server's replay guard says) and collect the emitted frames.
 """
 
 from __future__ import annotations
@@ -25,9 +26,13 @@ T0 = 100.0
 Delivery = tuple[float, MarkerPacket]
 
 
-def packet(camera: int, sequence: int, timestamp: float) -> MarkerPacket:
+def packet(camera: int, sequence: int, timestamp: float, epoch: int = 0) -> MarkerPacket:
     return MarkerPacket(
-        camera=camera, sequence=sequence, timestamp=timestamp, markers=np.zeros((8, 2))
+        camera=camera,
+        sequence=sequence,
+        timestamp=timestamp,
+        markers=np.zeros((8, 2)),
+        epoch=epoch,
     )
 
 
@@ -40,8 +45,13 @@ def run(sync: FrameSync, deliveries: Iterable[Delivery]) -> list[SyncedFrame]:
     """Offer the deliveries in arrival order as the server does; the frames emitted."""
     frames: list[SyncedFrame] = []
     last = -math.inf
+    epochs: dict[int, set[int]] = {}
     for arrival, pkt in sorted(deliveries, key=lambda d: d[0]):
         frames += sync.expire(arrival)
+        seen = epochs.setdefault(pkt.camera, set())
+        if seen and pkt.epoch not in seen:
+            sync.restart(pkt.camera)
+        seen.add(pkt.epoch)
         frames += sync.add(pkt, arrival)
         last = arrival
     return frames + sync.expire(last + 10.0)
@@ -191,9 +201,12 @@ def test_lossy_jittery_simulation(seed: int) -> None:
 # ---------------------------------------------------------------- restarts and pauses
 
 
-def restarted_stream(restart_at: int, clock_shift: float, captures: int) -> list[Delivery]:
+def restarted_stream(
+    restart_at: int, clock_shift: float, captures: int, new_epoch: bool = True
+) -> list[Delivery]:
     """Cameras 0 and 1 in step (delays 1 and 2 ms); camera 1 restarts at capture
-    `restart_at` with sequence 0 and its clock moved by `clock_shift` s."""
+    `restart_at` with sequence 0 and its clock moved by `clock_shift` s, in a new epoch
+    unless `new_epoch` is False."""
     deliveries = []
     for k in range(captures):
         t = capture_time(k)
@@ -201,17 +214,18 @@ def restarted_stream(restart_at: int, clock_shift: float, captures: int) -> list
         if k < restart_at:
             deliveries.append((t + 0.002, packet(1, k, t)))
         else:
-            deliveries.append((t + 0.002, packet(1, k - restart_at, t + clock_shift)))
+            restarted = packet(1, k - restart_at, t + clock_shift, epoch=int(new_epoch))
+            deliveries.append((t + 0.002, restarted))
     return deliveries
 
 
 @pytest.mark.parametrize(
     ("restart_at", "clock_shift"),
-    [(100, 0.0), (100, 500.0), (100, -500.0), (400, 0.0), (400, 500.0)],
+    [(100, 0.0), (100, 500.0), (100, -500.0), (400, 0.0), (400, 500.0), (400, -500.0)],
 )
-def test_camera_restart_at_sequence_zero(restart_at: int, clock_shift: float) -> None:
-    """Restarts at 100 repeat a remembered sequence; at 400 the sequence goes back while
-    the timestamp goes on."""
+def test_camera_restart_is_picked_up_at_once(restart_at: int, clock_shift: float) -> None:
+    """A restart (a new epoch) is picked up with its first packet, whatever its sequence
+    and clock: at 100 it repeats remembered sequences, at 400 it goes back beyond them."""
     sync = FrameSync([0, 1], FPS)
     frames = run(sync, restarted_stream(restart_at, clock_shift, restart_at + 60))
     assert sync.counts.restarts == 1
@@ -222,20 +236,15 @@ def test_camera_restart_at_sequence_zero(restart_at: int, clock_shift: float) ->
     assert sync.clock_offset(1) == pytest.approx(0.002 - clock_shift, abs=1e-6)
 
 
-def test_restart_with_clock_set_back_resyncs_within_clock_window() -> None:
-    """Sequence and timestamp both back, the sequence beyond the remembered ones: the
-    packets look stale and are late until the old clock samples leave the window."""
-    sync = FrameSync([0, 1], FPS, clock_window_s=2.0)
-    restart_at = 400
-    frames = run(sync, restarted_stream(restart_at, -500.0, restart_at + 240))
+def test_sequence_numbers_alone_never_restart_a_camera() -> None:
+    """Remembered sequences with other timestamps in the same epoch (a replay with
+    shifted sequence numbers, or a forged stream) are conflicts, not a restart: they
+    add nothing, and the camera's frames are skipped meanwhile."""
+    sync = FrameSync([0, 1], FPS)
+    frames = run(sync, restarted_stream(100, 0.0, 160, new_epoch=False))
     assert sync.counts.restarts == 0
-    after = [f for f in frames if sequences(f)[0] >= restart_at]
-    back = sequences(after[0])[0]
-    assert abs(back - (restart_at + 2.0 * FPS)) <= 1
-    assert [sequences(f)[0] for f in after] == list(range(back, restart_at + 240))
-    assert all(f.packets[1].sequence == f.packets[0].sequence - restart_at for f in after)
-    assert sync.counts.late == back - restart_at
-    assert sync.counts.skipped == back - restart_at
+    assert sync.counts.conflicts == 60 and sync.counts.skipped == 60
+    assert [sequences(f) for f in frames] == [[k, k] for k in range(100)]
 
 
 def test_stale_packet_after_a_restart_is_not_another_restart() -> None:
@@ -500,11 +509,13 @@ def test_misbehaving_cameras_keep_time_order_and_counts(seed: int) -> None:
     for camera, fps in zip((0, 1, 2, 9), rng.uniform(30.0, 240.0, 4), strict=True):
         node = rng.uniform(-100.0, 100.0)
         sequence = int(rng.integers(0, 2**32))
+        epoch = 0
         for t in np.arange(0.0, 2.0, 1.0 / fps):
             if rng.random() < 0.02:
                 sequence = int(rng.integers(0, 2**32))
                 node += rng.uniform(-1.0, 1.0)
-            pkt = packet(camera, sequence, float(t + node))
+                epoch += 1
+            pkt = packet(camera, sequence, float(t + node), epoch)
             for _ in range(1 + (rng.random() < 0.1)):
                 deliveries.append((float(T0 + t + rng.uniform(0.0, 0.03)), pkt))
             sequence = (sequence + 1) % 2**32

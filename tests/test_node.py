@@ -137,6 +137,9 @@ def test_synthetic_node_sends_the_tracked_markers(rig: Rig, synthetic_run) -> No
     packets, out = synthetic_run
     assert len(packets) == FRAMES
     assert [p.sequence for p in packets] == [(FIRST_SEQUENCE + i) % 2**32 for i in range(FRAMES)]
+    # one epoch until the sequence wraps, then another: it only increases within one
+    epochs = [p.epoch for p in packets]
+    assert len(set(epochs[:3])) == len(set(epochs[3:])) == 1 and epochs[2] != epochs[3]
     assert {(p.camera, p.session) for p in packets} == {(0, "stage-1")}
     times = np.array([p.timestamp for p in packets])
     np.testing.assert_allclose(times, START_AT + np.arange(FRAMES) / FPS, rtol=0, atol=1e-9)
@@ -201,8 +204,8 @@ def test_signed_packets_need_the_key(
     datagrams = [data for data, _ in receiver.datagrams()]
     assert len(datagrams) == round(1.2 * FPS)
     packets = [decode(d, key) for d in datagrams]
-    # 116 bytes signed, plus a count and 8 bytes per blob the tracker left unlabelled
-    sizes = [116 + (1 + 8 * len(p.blobs) if len(p.blobs) else 0) for p in packets]
+    # 124 bytes signed, plus a count and 8 bytes per blob the tracker left unlabelled
+    sizes = [124 + (1 + 8 * len(p.blobs) if len(p.blobs) else 0) for p in packets]
     assert [len(d) for d in datagrams] == sizes
     assert [p.sequence for p in packets] == list(range(len(datagrams)))
     with pytest.raises(PacketError, match="unexpected tag"):

@@ -32,7 +32,6 @@ from samba.service.packet import (
     PosePacket,
     decode,
     encode,
-    sequence_delta,
 )
 
 KEY = b"k" * 32
@@ -43,15 +42,16 @@ LAYOUT: tuple[tuple[int, int, str, str], ...] = (
     (5, 1, "uint8", "flags"),
     (6, 2, "uint16", "camera"),
     (8, 4, "uint32", "sequence"),
-    (12, 8, "float64", "timestamp"),
-    (20, 16, "bytes", "session"),
-    (36, 64, "float32[8][2]", "markers"),
+    (12, 8, "uint64", "epoch"),
+    (20, 8, "float64", "timestamp"),
+    (28, 16, "bytes", "session"),
+    (44, 64, "float32[8][2]", "markers"),
 )
 """(offset, size, type, field) of every field a packet always has."""
 OPTIONAL_LAYOUT: tuple[tuple[str, str, str, str], ...] = (
-    ("100", "1", "uint8", "count"),
-    ("101", "8n", "float32[n][2]", "blobs"),
-    ("100 + b", "16", "bytes", "tag"),
+    ("108", "1", "uint8", "count"),
+    ("109", "8n", "float32[n][2]", "blobs"),
+    ("108 + b", "16", "bytes", "tag"),
 )
 """(offset, size, type, field) of the fields flags announce, as the README writes them."""
 
@@ -66,6 +66,7 @@ def sample(**changes: object) -> MarkerPacket:
         "timestamp": 1234.5678,
         "markers": markers,
         "session": "take-01",
+        "epoch": 0x0123456789ABCDEF,
     }
     fields.update(changes)
     return MarkerPacket(**fields)
@@ -84,20 +85,21 @@ def reason_of(data: bytes, key: bytes | None = None) -> str:
 def test_layout_sizes_and_offsets() -> None:
     packet = sample()
     plain, signed = encode(packet), encode(packet, KEY)
-    assert (HEADER_BYTES, BODY_BYTES, TAG_BYTES) == (36, 100, 16)
-    assert (len(plain), len(signed)) == (100, 116)
+    assert (HEADER_BYTES, BODY_BYTES, TAG_BYTES) == (44, 108, 16)
+    assert (len(plain), len(signed)) == (108, 124)
     assert sum(size for _, size, _, _ in LAYOUT) == len(plain)
     assert all(o + s == LAYOUT[i + 1][0] for i, (o, s, _, _) in enumerate(LAYOUT[:-1]))
     assert signed[:BODY_BYTES] == plain[:5] + b"\x01" + plain[6:]
     assert plain[0:4] == b"SMBA"
-    assert (plain[4], plain[5], signed[5]) == (1, 0, 1)
+    assert (plain[4], plain[5], signed[5]) == (2, 0, 1)
     assert int.from_bytes(plain[6:8], "little") == 513
     assert int.from_bytes(plain[8:12], "little") == 0xDEADBEEF
-    assert struct.unpack("<d", plain[12:20]) == (1234.5678,)
-    assert plain[20:36] == b"take-01" + b"\0" * 9
-    values = np.frombuffer(plain[36:100], "<f4").reshape(8, 2)
+    assert int.from_bytes(plain[12:20], "little") == 0x0123456789ABCDEF
+    assert struct.unpack("<d", plain[20:28]) == (1234.5678,)
+    assert plain[28:44] == b"take-01" + b"\0" * 9
+    values = np.frombuffer(plain[44:108], "<f4").reshape(8, 2)
     assert np.array_equal(values, packet.markers, equal_nan=True)
-    assert signed[100:116] == hmac.new(KEY, signed[:100], hashlib.sha256).digest()[:16]
+    assert signed[108:124] == hmac.new(KEY, signed[:108], hashlib.sha256).digest()[:16]
 
 
 def test_docstring_table_matches_layout() -> None:
@@ -117,19 +119,19 @@ def test_unlabelled_blobs_follow_the_markers_under_the_tag() -> None:
     blobs = np.array([[12.25, 40.5], [100.125, 3.75], [0.0, 119.0]], dtype=np.float32)
     packet = sample(blobs=blobs)
     plain, signed = encode(packet), encode(packet, KEY)
-    assert (len(plain), len(signed)) == (100 + 1 + 24, 100 + 1 + 24 + 16)
+    assert (len(plain), len(signed)) == (108 + 1 + 24, 108 + 1 + 24 + 16)
     assert (plain[5], signed[5]) == (FLAG_BLOBS, FLAG_BLOBS | 1)
-    assert plain[100] == 3
-    assert np.array_equal(np.frombuffer(plain[101:], "<f4").reshape(3, 2), blobs)
-    assert signed[125:] == hmac.new(KEY, signed[:125], hashlib.sha256).digest()[:16]
+    assert plain[108] == 3
+    assert np.array_equal(np.frombuffer(plain[109:], "<f4").reshape(3, 2), blobs)
+    assert signed[133:] == hmac.new(KEY, signed[:133], hashlib.sha256).digest()[:16]
     assert decode(plain) == packet and decode(signed, KEY) == packet
     assert decode(plain) != sample()
     assert reason_of(plain[:-1]) == "too short" and reason_of(plain + b"\0") == "bad length"
-    assert reason_of(plain[:100] + b"\x00" + plain[101:]) == "bad values"
-    assert reason_of(plain[:100] + bytes([MAX_BLOBS + 1]) + plain[101:]) == "bad values"
-    assert reason_of(plain[:100]) == "too short"
-    assert reason_of(signed[:100] + b"\x02" + signed[101:], KEY) == "bad length"
-    nan = plain[:101] + np.full(6, np.nan, "<f4").tobytes()
+    assert reason_of(plain[:108] + b"\x00" + plain[109:]) == "bad values"
+    assert reason_of(plain[:108] + bytes([MAX_BLOBS + 1]) + plain[109:]) == "bad values"
+    assert reason_of(plain[:108]) == "too short"
+    assert reason_of(signed[:108] + b"\x02" + signed[109:], KEY) == "bad length"
+    nan = plain[:109] + np.full(6, np.nan, "<f4").tobytes()
     assert reason_of(nan) == "bad values"
     pose = encode(PosePacket(0, 0, 0.0, np.zeros((13, 3))))
     assert reason_of(pose[:5] + bytes([FLAG_POSE | FLAG_BLOBS]) + pose[6:]) == (
@@ -164,8 +166,10 @@ def test_round_trip_extremes() -> None:
     markers = np.full((8, 2), np.nan, dtype=np.float32)
     markers[0] = [np.finfo(np.float32).max, -np.finfo(np.float32).tiny]
     for packet in (
-        sample(camera=0, sequence=0, timestamp=0.0, session="", markers=markers),
-        sample(camera=65535, sequence=2**32 - 1, timestamp=-1e300, session="A" * 16),
+        sample(camera=0, sequence=0, timestamp=0.0, session="", markers=markers, epoch=0),
+        sample(
+            camera=65535, sequence=2**32 - 1, timestamp=-1e300, session="A" * 16, epoch=2**64 - 1
+        ),
     ):
         assert decode(encode(packet)) == packet
 
@@ -183,6 +187,7 @@ def test_packet_copies_markers_read_only() -> None:
 def test_equality() -> None:
     assert sample() == sample()
     assert sample() != sample(sequence=1)
+    assert sample() != sample(epoch=1)
     assert sample() != sample(markers=np.zeros((8, 2)))
     assert sample() != "packet"
 
@@ -196,6 +201,9 @@ def test_equality() -> None:
         {"camera": 1.0},
         {"sequence": 2**32},
         {"sequence": -1},
+        {"epoch": 2**64},
+        {"epoch": -1},
+        {"epoch": 1.0},
         {"timestamp": float("inf")},
         {"timestamp": float("nan")},
         {"timestamp": "1.0"},
@@ -247,7 +255,8 @@ def test_header_reasons() -> None:
     plain = encode(sample())
     assert reason_of(b"SMBB" + plain[4:]) == "bad magic"
     assert reason_of(b"\0" * 100) == "bad magic"
-    assert reason_of(plain[:4] + b"\x02" + plain[5:]) == "unsupported version"
+    assert reason_of(plain[:4] + b"\x01" + plain[5:]) == "unsupported version"
+    assert reason_of(plain[:4] + b"\x03" + plain[5:]) == "unsupported version"
     assert reason_of(plain[:4] + b"\x00" + plain[5:]) == "unsupported version"
     assert reason_of(plain[:5] + b"\x08" + plain[6:]) == "unsupported version"
     assert reason_of(plain[:5] + b"\x80" + plain[6:]) == "unsupported version"
@@ -262,18 +271,39 @@ def test_signing_reasons() -> None:
     assert reason_of(stripped, KEY) == "missing tag"
     assert reason_of(signed[:-1] + bytes([signed[-1] ^ 1]), KEY) == "bad tag"
     assert reason_of(signed[:40] + bytes([signed[40] ^ 1]) + signed[41:], KEY) == "bad tag"
+    assert reason_of(signed[:14] + bytes([signed[14] ^ 1]) + signed[15:], KEY) == "bad tag"
+
+
+def test_a_key_lookup_picks_the_key_of_the_packets_session_and_camera() -> None:
+    """Each node its own key: a packet signed with another camera's key is refused,
+    and a camera no key may speak for is "no key"."""
+    keys = {("take-01", 513): KEY, ("take-01", 514): OTHER_KEY}
+
+    def key_for(session: str, camera: int) -> bytes | None:
+        return keys.get((session, camera))
+
+    assert decode(encode(sample(), KEY), key_for=key_for) == sample()
+    assert decode(encode(sample(camera=514), OTHER_KEY), key_for=key_for) == sample(camera=514)
+    for forged in (sample(camera=514), sample(camera=515), sample(session="other")):
+        with pytest.raises(PacketError) as info:
+            decode(encode(forged, KEY), key_for=key_for)
+        assert info.value.reason == ("bad tag" if forged.camera == 514 else "no key")
+    with pytest.raises(PacketError, match="missing tag"):
+        decode(encode(sample()), key_for=key_for)
+    with pytest.raises(ValueError, match="not both"):
+        decode(encode(sample(), KEY), KEY, key_for=key_for)
 
 
 @pytest.mark.parametrize(
     ("offset", "value"),
     [
-        (12, struct.pack("<d", float("inf"))),  # timestamp
-        (12, struct.pack("<d", float("nan"))),
-        (20, b"take 01".ljust(16, b"\0")),  # session: a space
-        (20, b"\xe9".ljust(16, b"\0")),  # session: not ASCII
-        (20, b"ab\0cd".ljust(16, b"\0")),  # session: NUL inside, not padding
-        (36, struct.pack("<f", float("inf"))),  # marker 0 u
-        (40, struct.pack("<f", float("nan"))),  # marker 0 v only
+        (20, struct.pack("<d", float("inf"))),  # timestamp
+        (20, struct.pack("<d", float("nan"))),
+        (28, b"take 01".ljust(16, b"\0")),  # session: a space
+        (28, b"\xe9".ljust(16, b"\0")),  # session: not ASCII
+        (28, b"ab\0cd".ljust(16, b"\0")),  # session: NUL inside, not padding
+        (44, struct.pack("<f", float("inf"))),  # marker 0 u
+        (48, struct.pack("<f", float("nan"))),  # marker 0 v only
     ],
 )
 def test_value_reasons(offset: int, value: bytes) -> None:
@@ -284,7 +314,7 @@ def test_value_reasons(offset: int, value: bytes) -> None:
 
 def test_value_errors_are_checked_after_the_tag() -> None:
     signed = encode(sample(), KEY)
-    forged = signed[:12] + struct.pack("<d", float("inf")) + signed[20:]
+    forged = signed[:20] + struct.pack("<d", float("inf")) + signed[28:]
     assert reason_of(forged, KEY) == "bad tag"
 
 
@@ -293,16 +323,6 @@ def test_empty_key_is_a_configuration_error() -> None:
         encode(sample(), b"")
     with pytest.raises(ValueError):
         decode(encode(sample()), b"")
-
-
-def test_sequence_delta_wraps() -> None:
-    assert sequence_delta(5, 3) == 2
-    assert sequence_delta(3, 5) == -2
-    assert sequence_delta(7, 7) == 0
-    assert sequence_delta(1, 2**32 - 2) == 3
-    assert sequence_delta(2**32 - 2, 1) == -3
-    assert sequence_delta(2**31 - 1, 0) == 2**31 - 1
-    assert sequence_delta(2**31, 0) == -(2**31)
 
 
 # --- fuzzing -----------------------------------------------------------------------------
@@ -316,6 +336,7 @@ packets = st.builds(
     MarkerPacket,
     camera=st.integers(0, 65535),
     sequence=st.integers(0, 2**32 - 1),
+    epoch=st.integers(0, 2**64 - 1),
     timestamp=st.floats(allow_nan=False, allow_infinity=False),
     markers=st.lists(markers_rows, min_size=8, max_size=8).map(np.array),
     session=st.from_regex(r"[A-Za-z0-9._-]{0,16}", fullmatch=True),
@@ -326,8 +347,8 @@ packets = st.builds(
 )
 datagrams = st.one_of(
     st.binary(max_size=MAX_PACKET_BYTES + 8),
-    st.binary(max_size=BODY_BYTES + TAG_BYTES + 4).map(lambda b: b"SMBA\x01" + b),
-    st.binary(min_size=BODY_BYTES - 6, max_size=BODY_BYTES - 6).map(lambda b: b"SMBA\x01\x00" + b),
+    st.binary(max_size=BODY_BYTES + TAG_BYTES + 4).map(lambda b: b"SMBA\x02" + b),
+    st.binary(min_size=BODY_BYTES - 6, max_size=BODY_BYTES - 6).map(lambda b: b"SMBA\x02\x00" + b),
 )
 
 
@@ -368,7 +389,7 @@ def test_fuzz_single_byte_mutation(
         assert result is None  # length damage or a signed packet: always dropped
         if key is not None and not structural:
             assert reason_of(mutated, key) == "bad tag"
-    elif position < 12:  # camera, sequence: every value is valid
+    elif position < 20:  # camera, sequence, epoch: every value is valid
         assert result is not None
     elif result is None:
         assert reason_of(mutated) == "bad values"
@@ -376,16 +397,17 @@ def test_fuzz_single_byte_mutation(
 
 def test_a_pose_packet_carries_13_joints_under_the_same_header() -> None:
     pose = np.arange(39, dtype=np.float32).reshape(13, 3) / 10
-    packet = PosePacket(7, 42, 12.5, pose, "stage")
+    packet = PosePacket(7, 42, 12.5, pose, "stage", 99)
     plain, signed = encode(packet), encode(packet, KEY)
-    assert (len(plain), len(signed), POSE_BODY_BYTES) == (192, 208, 192)
+    assert (len(plain), len(signed), POSE_BODY_BYTES) == (200, 216, 200)
     assert plain[5] == FLAG_POSE and signed[5] == FLAG_POSE | 1
-    assert np.array_equal(np.frombuffer(plain[36:], "<f4").reshape(13, 3), pose)
+    assert np.array_equal(np.frombuffer(plain[44:], "<f4").reshape(13, 3), pose)
     assert decode(plain) == packet and decode(signed, KEY) == packet
-    assert signed[192:] == hmac.new(KEY, signed[:192], hashlib.sha256).digest()[:16]
+    assert decode(plain).epoch == 99
+    assert signed[200:] == hmac.new(KEY, signed[:200], hashlib.sha256).digest()[:16]
     assert reason_of(plain[:-1]) == "too short" and reason_of(plain + b"\0") == "bad length"
     assert reason_of(signed[:-1] + bytes([signed[-1] ^ 1]), KEY) == "bad tag"
-    nan = plain[:36] + np.full(39, np.nan, "<f4").tobytes()
+    nan = plain[:44] + np.full(39, np.nan, "<f4").tobytes()
     assert reason_of(nan) == "bad values"
     with pytest.raises(ValueError, match="NaN or infinite"):
         PosePacket(0, 0, 0.0, np.full((13, 3), np.inf))

@@ -20,6 +20,7 @@ from live_fixtures import VmcReceiver, config, offline_poses, until
 from samba.base.errors import InputError
 from samba.ingest.mcap_take import read_take
 from samba.service.errors import ServiceError
+from samba.service.node_keys import NodeKey, NodeKeys
 from samba.service.packet import encode
 from samba.service.serve import CORES, LiveServer, auto_workers
 from samba.service.session_config import read_sessions
@@ -109,39 +110,45 @@ def test_sessions_whose_packets_arrive_together_each_get_the_offline_poses(
 def test_signed_packets_and_bad_datagrams(
     live_store: Path, live_calibration: Path, live_capture: SyntheticCapture, tmp_path: Path
 ) -> None:
-    key = bytes(range(32))
+    key, other = bytes(range(32)), bytes(range(1, 33))
+    keys = NodeKeys([NodeKey(key, frozenset({0})), NodeKey(other, frozenset({1}), "stage")])
 
     async def run() -> dict:
         cfg = config(live_calibration, live_store)
-        async with LiveServer([cfg], tmp_path, udp=("127.0.0.1", 0), http=None, key=key) as live:
+        bind = {"udp": ("127.0.0.1", 0), "http": None}
+        async with LiveServer([cfg], tmp_path, **bind, keys=keys) as live:
             assert live.server is not None
             with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-                good = live_capture.packet(0, 0, time.time(), "stage")
+                good = live_capture.packet(0, 0, time.time(), "stage", epoch=5)
                 signed = encode(good, key)
                 for data in (
                     b"",
                     b"x" * 300,
                     b"GIF89a" + bytes(94),
-                    encode(good),  # unsigned while the server has a key
+                    encode(good),  # unsigned while the server has keys
                     encode(good, b"wrong key, 32 bytes long........"),
+                    encode(good, other),  # camera 1's key speaking for camera 0
                     signed[:-1] + bytes([signed[-1] ^ 0xFF]),  # the tag's last byte changed
                     encode(live_capture.packet(0, 1, time.time(), "other"), key),
-                    encode(good, key),
+                    encode(dataclasses.replace(good, camera=7), key),  # a camera of no key
+                    signed,
+                    signed,  # the same packet again
                 ):
                     sock.sendto(data, live.udp_address)
-            await until(lambda: live.server is not None and live.server.datagrams == 8)
+            await until(lambda: live.server is not None and live.server.datagrams == 11)
             return live.server.metrics()
 
     metrics = asyncio.run(run())
-    assert metrics["datagrams"] == 8
+    assert metrics["datagrams"] == 11
     assert metrics["dropped"] == {
-        "total": 7,
+        "total": 10,
         "bad magic": 1,
-        "bad tag": 2,
+        "bad tag": 3,
+        "duplicate": 1,
         "missing tag": 1,
+        "no key": 2,
         "too long": 1,
         "too short": 1,
-        "unknown session": 1,
     }
     assert metrics["sessions"]["stage"]["sync"]["packets"] == 1
 
@@ -220,6 +227,17 @@ def test_a_token_guards_the_api(live_store: Path, live_calibration: Path, tmp_pa
 def test_the_api_is_not_exposed_without_a_token(live_store: Path, live_calibration: Path) -> None:
     with pytest.raises(Exception, match="token"):
         LiveServer([config(live_calibration, live_store)], "takes", http=("0.0.0.0", 8080))
+
+
+def test_camera_packets_are_not_received_beyond_loopback_without_keys(
+    live_store: Path, live_calibration: Path
+) -> None:
+    """Item 3 of issue 41: an unsigned packet could come from anyone on the network."""
+    cfg = config(live_calibration, live_store)
+    with pytest.raises(ServiceError, match=r"udp 0\.0\.0\.0:9870: .*--keys FILE"):
+        LiveServer([cfg], "takes", udp=("0.0.0.0", 9870), http=None)
+    keys = NodeKeys([NodeKey(b"k" * 32, frozenset({0, 1}))])
+    LiveServer([cfg], "takes", udp=("0.0.0.0", 9870), http=None, keys=keys)  # allowed
 
 
 def test_a_port_already_in_use_is_named(

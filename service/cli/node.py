@@ -107,8 +107,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--key-file",
         metavar="FILE",
-        help=f"shared secret (the file's raw bytes, at least {MIN_KEY_BYTES}) to sign "
-        "packets with (HMAC); the server must use the same file",
+        help=f"this node's key (the file's raw bytes, at least {MIN_KEY_BYTES}) to sign "
+        "packets with (HMAC); the server's --keys file lists it for this camera",
     )
     timing = parser.add_argument_group("timing")
     timing.add_argument(

@@ -12,7 +12,8 @@ from threadpoolctl import threadpool_limits
 
 from samba.base import address, bind_address, finite_float, natural, positive_float
 from samba.reconstruct import METHODS
-from samba.service.packet import read_key_file
+from samba.service.node_keys import read_node_keys
+from samba.service.replay_guard import DEFAULT_MAX_SKEW_S
 from samba.service.serve import (
     CORES,
     HTTP_PORT,
@@ -81,7 +82,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         type=bind_address,
         default=("127.0.0.1", UDP_PORT),
         metavar="HOST:PORT",
-        help=f"where camera nodes send (default 127.0.0.1:{UDP_PORT}; 0.0.0.0 for other hosts)",
+        help=f"where camera nodes send (default 127.0.0.1:{UDP_PORT}; 0.0.0.0 for other hosts, "
+        "which needs --keys)",
     )
     net.add_argument(
         "--http",
@@ -92,7 +94,20 @@ def register(parser: argparse.ArgumentParser) -> None:
     )
     net.add_argument("--no-http", action="store_true", help="no control API or viewer")
     net.add_argument("--token", help="API token (default $SAMBA_TOKEN); needed beyond loopback")
-    net.add_argument("--key-file", help="shared HMAC key file; packets must then be signed")
+    net.add_argument(
+        "--keys",
+        metavar="FILE",
+        help="the nodes' keys (TOML, [[node]] tables: key_file, cameras, session); packets "
+        "must then be signed, each by the key of its camera; needed beyond loopback",
+    )
+    net.add_argument(
+        "--max-skew",
+        type=positive_float,
+        default=DEFAULT_MAX_SKEW_S,
+        metavar="SECONDS",
+        help="drop packets whose timestamp is further than this from the server's clock "
+        f"(default {DEFAULT_MAX_SKEW_S:g}; the nodes' clocks must agree that well)",
+    )
     parser.add_argument(
         "--workers",
         type=_workers,
@@ -118,14 +133,15 @@ def register(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Start the server, print where it listens, serve, print a summary at the end."""
     configs = _configs(args)
-    key = read_key_file(args.key_file) if args.key_file else None
+    keys = read_node_keys(args.keys) if args.keys else None
     server = LiveServer(
         configs,
         args.takes,
         udp=args.udp,
         http=None if args.no_http else args.http,
         token=args.token or os.environ.get("SAMBA_TOKEN") or None,
-        key=key,
+        keys=keys,
+        max_skew_s=args.max_skew,
         workers=auto_workers(configs) if args.workers == "auto" else args.workers,
     )
     # Per-frame linear algebra is on 39 x 39 matrices: BLAS threads only contend with
@@ -194,9 +210,11 @@ def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:
 
 
 def _print_summary(metrics: dict, takes: list) -> None:
+    dropped = metrics["dropped"]
+    reasons = ", ".join(f"{reason} {n}" for reason, n in dropped.items() if reason != "total")
     print(
-        f"samba serve: stopped; {metrics['datagrams']} datagrams in, "
-        f"{metrics['dropped']['total']} dropped"
+        f"samba serve: stopped; {metrics['datagrams']} datagrams in, {dropped['total']} dropped"
+        + (f" ({reasons})" if reasons else "")
     )
     for name, m in metrics["sessions"].items():
         sync, latency = m["sync"], m["latency"]
