@@ -254,12 +254,13 @@ def run(
         port = probe.getsockname()[1]
     argv = [sys.executable, "-m", "samba.cli", "serve", "--config", str(config)]
     argv += ["--udp", f"127.0.0.1:{port}", "--http", "127.0.0.1:0", "--takes", str(tmp)]
-    argv += ["--workers", str(workers)]
+    argv += ["--workers", str(workers), "--max-sessions", str(sessions)]
     server = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, text=True)
     try:
         assert server.stdout is not None
         line = next(line for line in server.stdout if "control API:" in line)
-        url = line.split("control API:")[1].split()[0].removesuffix("/api/health")
+        url = line.split("control API:")[1].split()[0].rstrip(",").removesuffix("/api/health")
+        token = line.split("Bearer ")[1].split()[0]
 
         async def serve_frames() -> np.ndarray:
             for receiver in receivers.inputs:
@@ -271,7 +272,10 @@ def run(
             return sent
 
         sent = asyncio.run(serve_frames())
-        with urllib.request.urlopen(f"{url}/api/metrics", timeout=30) as answer:
+        request = urllib.request.Request(
+            f"{url}/api/metrics", headers={"Authorization": f"Bearer {token}"}
+        )
+        with urllib.request.urlopen(request, timeout=30) as answer:
             metrics = json.load(answer)
     finally:
         server.send_signal(signal.SIGINT)

@@ -1,10 +1,10 @@
 """`samba demo`: a whole live capture on this machine, start to finish, in one command.
 
 1. A pose database: built from the built-in synthetic motions (or `--db STORE`).
-2. The live server (`samba.service.serve.LiveServer`) on loopback: UDP for camera packets, the
-   viewer and control API on HTTP, VMC to `--vmc` (default the VMC marionette port
-   39539, where VSeeFace / EVMC4U listen) and to a receiver of its own that counts what
-   arrives.
+2. The live server (`samba.service.serve.LiveServer`) on loopback: UDP for camera packets,
+   the viewer and control API on HTTP (the token drawn for the run, in the viewer's URL),
+   VMC to `--vmc` (default the VMC marionette port 39539, where VSeeFace / EVMC4U
+   listen) and to a receiver of its own that counts what arrives.
 3. Two simulated camera nodes, each its own UDP socket and its own key (drawn for the
    run; the server checks each camera's packets with its node's key), playing a
    held-out synthetic motion (or `--motion FILE.bvh`, or the real markers of `--motion
@@ -129,11 +129,13 @@ async def _demo(
     async with live:
         assert live.server is not None
         session = live.server.session(SESSION)
-        viewer = f"{live.http_url}/viewer/{SESSION}"
+        viewer = live.viewer_url(SESSION)
+        assert viewer is not None
         host, port = live.udp_address
         vmc_host, vmc_port = settings.vmc
         print(f"2. server: camera packets on udp {host}:{port}; VMC -> {vmc_host}:{vmc_port}")
-        print(f"   live viewer: {viewer}   control API: {live.http_url}/api/health")
+        print(f"   live viewer: {viewer}")
+        print(f"   control API: {live.http_url}/api/health, Authorization: Bearer {live.token}")
         if settings.open_viewer and _has_display():
             webbrowser.open(viewer)
         take = session.start_take(f"demo_{motion_name}")

@@ -6,20 +6,24 @@ late cameras ran out. The frames are computed in `workers` worker processes
 (`samba.service.pipeline_workers.WorkerPipelines`), or in the event loop when `workers` is 0;
 results come back to the loop, which records them and feeds the viewer.
 The HTTP side (aiohttp) serves the control API (`samba.service.control_api`) and the live
-viewer (`samba.service.viewer`) on one port. The API is bound to 127.0.0.1 by default;
-binding it to any other address requires a token. Likewise the UDP input: binding it
-beyond loopback requires the nodes' keys (`samba.service.node_keys`), since an
-unsigned packet could come from anyone on the network.
+viewer (`samba.service.viewer`) on one port, bound to 127.0.0.1 by default. Every HTTP
+request carries the server's token (given, or drawn at start), names this server in
+its `Host` header and, when it changes state, comes from the server's own pages
+(`samba.service.api_access`); sessions started over the API name only what the
+server's `SessionPolicy` allows. Binding the UDP input beyond loopback requires the
+nodes' keys (`samba.service.node_keys`), since an unsigned packet could come from anyone
+on the network.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import ipaddress
 import os
+import secrets
 import signal
 import time
+import urllib.parse
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from types import TracebackType
@@ -27,7 +31,15 @@ from types import TracebackType
 from aiohttp import web
 
 from samba.cameras import read_calibration
-from samba.service.control_api import add_control_routes, token_middleware
+from samba.service.api_access import (
+    MIN_TOKEN_CHARS,
+    HostCheck,
+    is_loopback,
+    json_errors_middleware,
+    origin_middleware,
+    token_middleware,
+)
+from samba.service.control_api import MAX_BODY_BYTES, add_control_routes
 from samba.service.errors import ServiceError
 from samba.service.node_keys import NodeKeys
 from samba.service.pipeline_workers import FrameDone, WorkerPipelines
@@ -35,6 +47,7 @@ from samba.service.replay_guard import DEFAULT_MAX_SKEW_S
 from samba.service.server import CaptureServer
 from samba.service.session import CaptureSession
 from samba.service.session_config import SessionConfig
+from samba.service.session_policy import SessionPolicy
 from samba.service.udp_input import UdpInput
 from samba.service.viewer import ViewerHub, add_viewer_routes
 
@@ -66,16 +79,6 @@ def auto_workers(configs: Iterable[SessionConfig]) -> int:
     return CORES if any(labelling) else 0
 
 
-def is_loopback(host: str) -> bool:
-    """True for localhost and loopback addresses (127.0.0.0/8, ::1)."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
 def _bind_error(kind: str, address: tuple[str, int], purpose: str, exc: OSError) -> ServiceError:
     """The error for a `kind` ("udp", "http") socket that cannot be bound to `address`
     (host, port): names the address, what it was for, and the system's reason."""
@@ -87,12 +90,14 @@ class LiveServer:
     """A capture server with its sockets; use `async with LiveServer(...) as server:`.
 
     `udp` and `http` are (host, port) to bind (port 0: any free port; `http=None`: no
-    HTTP side). `token` protects the HTTP side and is required unless `http` is a
-    loopback address; `keys` are the camera nodes' keys, required unless `udp` is a
-    loopback address; `max_skew_s` how far (s) a packet's timestamp may be from the
-    server's clock; `workers` the number of worker processes computing frames (0: in the
-    event loop). `ServiceError` for a missing token or keys; session files are opened
-    by `start`.
+    HTTP side). `token` protects the HTTP side (None: one is drawn, `token` tells it),
+    at least `MIN_TOKEN_CHARS` characters; `allow_hosts` are DNS names the HTTP side is
+    reached by besides its address; `policy` what API sessions may name (None: the
+    files and VMC receivers of `configs`). `keys` are the camera nodes' keys, required
+    unless `udp` is a loopback address; `max_skew_s` how far (s) a packet's timestamp
+    may be from the server's clock; `workers` the number of worker processes computing
+    frames (0: in the event loop). `ServiceError` for a short token, missing keys or
+    more sessions than the policy allows; session files are opened by `start`.
     """
 
     def __init__(
@@ -103,15 +108,23 @@ class LiveServer:
         udp: tuple[str, int] = ("127.0.0.1", UDP_PORT),
         http: tuple[str, int] | None = ("127.0.0.1", HTTP_PORT),
         token: str | None = None,
+        allow_hosts: Iterable[str] = (),
+        policy: SessionPolicy | None = None,
         keys: NodeKeys | None = None,
         max_skew_s: float = DEFAULT_MAX_SKEW_S,
         workers: int = 0,
     ) -> None:
-        if http is not None and token is None and not is_loopback(http[0]):
+        if token is not None and len(token) < MIN_TOKEN_CHARS:
             raise ServiceError(
-                f"{http[0]}:{http[1]}",
-                "the control API is bound beyond this machine: give a token (--token or "
-                "$SAMBA_TOKEN), or bind it to 127.0.0.1",
+                "--token", f"a token has at least {MIN_TOKEN_CHARS} characters, got {len(token)}"
+            )
+        self._configs = list(configs)
+        self._policy = SessionPolicy.of(self._configs) if policy is None else policy
+        if len(self._configs) > self._policy.max_sessions:
+            raise ServiceError(
+                "--max-sessions",
+                f"{len(self._configs)} sessions to start, but the server runs at most "
+                f"{self._policy.max_sessions}",
             )
         if keys is None and not is_loopback(udp[0]):
             raise ServiceError(
@@ -119,11 +132,12 @@ class LiveServer:
                 "camera packets are received beyond this machine: give the nodes' keys "
                 "(--keys FILE), or bind --udp to 127.0.0.1",
             )
-        self._configs = list(configs)
         self._takes_dir = Path(takes_dir)
         self._udp_bind = udp
         self._http_bind = http
-        self._token = token
+        self.token = token or secrets.token_urlsafe(24)
+        """The HTTP side's token."""
+        self._hosts = None if http is None else HostCheck(http[0], allow_hosts)
         self._keys = keys
         self._max_skew_s = max_skew_s
         self._workers = workers
@@ -173,11 +187,16 @@ class LiveServer:
             raise
 
     async def _start_http(self, host: str, port: int) -> None:
-        middlewares = [token_middleware(self._token)] if self._token else []
-        app = web.Application(middlewares=middlewares)
+        assert self.server is not None and self._hosts is not None
+        middlewares = [
+            json_errors_middleware,
+            self._hosts.middleware(),
+            origin_middleware,
+            token_middleware(self.token),
+        ]
+        app = web.Application(middlewares=middlewares, client_max_size=MAX_BODY_BYTES)
         add_viewer_routes(app, self.hub)
-        assert self.server is not None
-        add_control_routes(app, self.server)
+        add_control_routes(app, self.server, self._policy)
         self._runner = web.AppRunner(app, access_log=None)
         await self._runner.setup()
         site = web.TCPSite(self._runner, host, port)
@@ -187,6 +206,7 @@ class LiveServer:
             raise _bind_error("http", (host, port), "serve the viewer and API", exc) from exc
         bound = self._runner.addresses[0]
         self.http_address = (bound[0], bound[1])
+        self._hosts.port = bound[1]
 
     @property
     def udp_address(self) -> tuple[str, int]:
@@ -201,6 +221,14 @@ class LiveServer:
         if self.http_address is None:
             return None
         return f"http://{self.http_address[0]}:{self.http_address[1]}"
+
+    def viewer_url(self, session: str) -> str | None:
+        """The viewer page of `session` with the token in its query (the page passes it
+        on), None without an HTTP side."""
+        if self.http_url is None:
+            return None
+        token = urllib.parse.quote(self.token, safe="")
+        return f"{self.http_url}/viewer/{urllib.parse.quote(session)}?token={token}"
 
     async def stop(self) -> None:
         """Stop reading, close the viewer sockets and HTTP side, finish recording takes."""

@@ -36,9 +36,11 @@ VIEWER_PAGE: Path = Path(__file__).with_name("viewer_page") / "index.html"
 
 CONTENT_SECURITY_POLICY = (
     "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; "
-    "connect-src 'self'; img-src data:; base-uri 'none'; form-action 'none'"
+    "connect-src 'self'; img-src data:; base-uri 'none'; form-action 'none'; "
+    "frame-ancestors 'none'"
 )
-"""Sent with the page: the browser refuses anything but inline code and same-origin sockets."""
+"""Sent with the page: the browser refuses anything but inline code and same-origin
+sockets, and no other page may frame it."""
 
 _WRITER_LIMIT = 64 * 1024
 """Bytes a client socket may buffer in the server before a send waits for it to drain."""
@@ -246,6 +248,8 @@ async def _page(request: web.Request) -> web.FileResponse:
             "Content-Type": "text/html; charset=utf-8",
             "Cache-Control": "no-cache",
             "Content-Security-Policy": CONTENT_SECURITY_POLICY,
+            "Referrer-Policy": "no-referrer",  # its URL carries the API token
+            "X-Content-Type-Options": "nosniff",
         },
     )
 

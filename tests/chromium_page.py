@@ -67,12 +67,21 @@ class ChromiumPage:
 
     `width` x `height` is the viewport in CSS pixels (device scale 1, so screenshots have
     that many pixels); `timeout_s` bounds, in seconds, the start, every command and every
-    page load. `errors` lists what the page reported as an error or warning, one string
-    each, prefixed by where it came from ("console.error:", "exception:", "log warning:").
+    page load; `flags` are passed to Chromium besides its own (e.g.
+    `--host-resolver-rules=MAP name 127.0.0.1`). `errors` lists what the page reported as
+    an error or warning, one string each, prefixed by where it came from
+    ("console.error:", "exception:", "log warning:").
     """
 
-    def __init__(self, width: int = 960, height: int = 600, timeout_s: float = 20.0) -> None:
+    def __init__(
+        self,
+        width: int = 960,
+        height: int = 600,
+        timeout_s: float = 20.0,
+        flags: tuple[str, ...] = (),
+    ) -> None:
         self.width = width
+        self.flags = flags
         self.height = height
         self.timeout_s = timeout_s
         self.errors: list[str] = []
@@ -113,6 +122,7 @@ class ChromiumPage:
         self._process = await asyncio.create_subprocess_exec(
             self._binary,
             *_FLAGS,
+            *self.flags,
             f"--user-data-dir={self._profile.name}",
             f"--window-size={self.width},{self.height}",
             "about:blank",

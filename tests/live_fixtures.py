@@ -100,15 +100,19 @@ def free_udp_port() -> int:
 
 @dataclass
 class ServeProcess:
-    """A `samba serve` subprocess: where it listens, and its process."""
+    """A `samba serve` subprocess: where it listens, its API token, and its process."""
 
     udp: tuple[str, int]
     http_url: str | None
+    token: str | None
     process: subprocess.Popen[str]
 
     def get(self, path: str) -> dict:
-        """GET a control API path; the JSON answer."""
-        with urllib.request.urlopen(f"{self.http_url}{path}", timeout=30) as answer:
+        """GET a control API path with the token; the JSON answer."""
+        request = urllib.request.Request(
+            f"{self.http_url}{path}", headers={"Authorization": f"Bearer {self.token}"}
+        )
+        with urllib.request.urlopen(request, timeout=30) as answer:
             return json.load(answer)
 
 
@@ -124,15 +128,17 @@ def serve_process(*args: str, http: bool = True) -> Iterator[ServeProcess]:
     )
     try:
         assert process.stdout is not None
-        url = None
+        url = token = None
         for line in process.stdout:
             if "control API:" in line:
-                url = line.split("control API:")[1].split()[0].removesuffix("/api/health")
+                url = line.split("control API:")[1].split()[0].rstrip(",")
+                url = url.removesuffix("/api/health")
+                token = line.split("Bearer ")[1].split()[0]
             if url if http else "camera packets on udp" in line:
                 break
         else:
             raise AssertionError(f"samba serve did not start: {process.communicate()[1]}")
-        yield ServeProcess(("127.0.0.1", port), url, process)
+        yield ServeProcess(("127.0.0.1", port), url, token, process)
     finally:
         if process.poll() is None:
             process.send_signal(signal.SIGINT)

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import functools
 import os
 import sys
 from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from samba.base import address, bind_address, finite_float, natural, positive_float
+from samba.base import InputError, address, bind_address, finite_float, natural, positive_float
 from samba.reconstruct import METHODS
 from samba.service.node_keys import read_node_keys
 from samba.service.replay_guard import DEFAULT_MAX_SKEW_S
@@ -24,6 +25,7 @@ from samba.service.serve import (
 )
 from samba.service.session import CaptureSession
 from samba.service.session_config import INPUTS, LABELLERS, SessionConfig, read_sessions
+from samba.service.session_policy import DEFAULT_MAX_SESSIONS, SessionPolicy
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -93,7 +95,24 @@ def register(parser: argparse.ArgumentParser) -> None:
         help=f"control API and viewer (default 127.0.0.1:{HTTP_PORT})",
     )
     net.add_argument("--no-http", action="store_true", help="no control API or viewer")
-    net.add_argument("--token", help="API token (default $SAMBA_TOKEN); needed beyond loopback")
+    net.add_argument(
+        "--token",
+        help="API token, at least 16 characters (default $SAMBA_TOKEN, else drawn at start "
+        "and printed in the viewer's URL)",
+    )
+    net.add_argument(
+        "--token-file",
+        metavar="FILE",
+        help="write the API token to FILE, readable by you only, instead of printing it",
+    )
+    net.add_argument(
+        "--allow-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="a DNS name browsers reach the viewer and API by (repeatable); its address, "
+        "and localhost on loopback, always work",
+    )
     net.add_argument(
         "--keys",
         metavar="FILE",
@@ -107,6 +126,31 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="SECONDS",
         help="drop packets whose timestamp is further than this from the server's clock "
         f"(default {DEFAULT_MAX_SKEW_S:g}; the nodes' clocks must agree that well)",
+    )
+    api = parser.add_argument_group("sessions started over the control API")
+    api.add_argument(
+        "--api-files",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="a folder whose calibrations, stores and avatars API sessions may name "
+        "(repeatable); besides it only the files given here at start",
+    )
+    api.add_argument(
+        "--api-vmc",
+        type=address,
+        action="append",
+        default=[],
+        metavar="HOST:PORT",
+        help="a VMC receiver API sessions may send to (repeatable); besides it only those "
+        "given here at start",
+    )
+    api.add_argument(
+        "--max-sessions",
+        type=natural,
+        default=DEFAULT_MAX_SESSIONS,
+        metavar="N",
+        help=f"most sessions the server runs (default {DEFAULT_MAX_SESSIONS})",
     )
     parser.add_argument(
         "--workers",
@@ -134,21 +178,31 @@ def run(args: argparse.Namespace) -> int:
     """Start the server, print where it listens, serve, print a summary at the end."""
     configs = _configs(args)
     keys = read_node_keys(args.keys) if args.keys else None
+    if args.max_sessions < 1:
+        raise InputError("--max-sessions", "must be at least 1")
+    policy = SessionPolicy.of(
+        configs, [Path(folder) for folder in args.api_files], args.api_vmc, args.max_sessions
+    )
     server = LiveServer(
         configs,
         args.takes,
         udp=args.udp,
         http=None if args.no_http else args.http,
         token=args.token or os.environ.get("SAMBA_TOKEN") or None,
+        allow_hosts=args.allow_host,
+        policy=policy,
         keys=keys,
         max_skew_s=args.max_skew,
         workers=auto_workers(configs) if args.workers == "auto" else args.workers,
     )
+    if args.token_file:
+        _write_token_file(Path(args.token_file), server.token)
+    started = functools.partial(_print_start, token_file=args.token_file)
     # Per-frame linear algebra is on 39 x 39 matrices: BLAS threads only contend with
     # the event loop (and each other) for the cores.
     with threadpool_limits(1):
         metrics, takes = asyncio.run(
-            serve_until_stopped(server, args.record, args.duration, started=_print_start)
+            serve_until_stopped(server, args.record, args.duration, started=started)
         )
     _print_summary(metrics, takes)
     return 0
@@ -182,7 +236,21 @@ def _configs(args: argparse.Namespace) -> list[SessionConfig]:
     return [SessionConfig.from_mapping(values, "--session")]
 
 
-def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:
+def _write_token_file(path: Path, token: str) -> None:
+    """Write `token` to `path`, readable and writable by its owner only (mode 0600, also
+    when the file existed); `InputError` naming the file when it cannot be written."""
+    try:
+        descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(descriptor, "w", encoding="ascii") as file:
+            os.fchmod(file.fileno(), 0o600)
+            file.write(token + "\n")
+    except OSError as exc:
+        raise InputError(str(path), f"cannot write the token: {exc.strerror or exc}") from None
+
+
+def _print_start(
+    server: LiveServer, sessions: list[CaptureSession], token_file: str | None = None
+) -> None:
     host, port = server.udp_address
     print(f"samba serve: camera packets on udp {host}:{port}")
     for s in sessions:
@@ -196,7 +264,8 @@ def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:
         )
         print(f"  session {s.name}: {source}, {c.fps:g} fps, VMC -> {vmc}")
         if server.http_url:
-            print(f"    viewer: {server.http_url}/viewer/{s.name}")
+            viewer = f"{server.http_url}/viewer/{s.name}?token=<the token in {token_file}>"
+            print(f"    viewer: {viewer if token_file else server.viewer_url(s.name)}")
         take = s.recording
         if take is not None:
             print(f"    recording take {take.name} -> {take.path}")
@@ -205,7 +274,9 @@ def _print_start(server: LiveServer, sessions: list[CaptureSession]) -> None:
     else:
         print("  frames computed in the event loop, those that arrive together in one batch")
     if server.http_url:
-        print(f"  control API: {server.http_url}/api/health (Ctrl-C stops)")
+        token = f"the token in {token_file}" if token_file else server.token
+        print(f"  control API: {server.http_url}/api/health, Authorization: Bearer {token}")
+        print("  (Ctrl-C stops)")
     sys.stdout.flush()
 
 
