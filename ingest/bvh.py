@@ -433,9 +433,12 @@ def _read_table(buffer: np.ndarray, frames: int, n_columns: int) -> np.ndarray |
         return None
     kernels = _kernels()
     kernels.KERNELS.warm_up()
-    most_inexact = 64 + frames * n_columns // _INEXACT_SHARE
+    # A row takes at least two bytes a number: a header may claim more frames than the
+    # text can hold, and the table is sized by the text.
+    most_rows = min(frames, len(buffer) // (2 * n_columns) + 1)
+    most_inexact = 64 + most_rows * n_columns // _INEXACT_SHARE
     status, rows, values, inexact = kernels.motion_table_kernel(
-        buffer, n_columns, frames, most_inexact
+        buffer, n_columns, most_rows, most_inexact
     )
     if status != kernels.READ:
         return None

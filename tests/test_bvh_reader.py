@@ -224,6 +224,13 @@ def test_a_frames_count_that_disagrees_with_the_rows_is_still_diagnosed() -> Non
         parse_bvh(fewer)
 
 
+def test_a_frames_count_far_beyond_the_text_is_diagnosed_without_reserving_it() -> None:
+    rows = [f"{i} 0 0" for i in range(5)]
+    huge = frames_text(rows).replace("Frames: 5", "Frames: 4000000000000").encode()
+    with pytest.raises(BvhError, match="file ends after 5 of the 4000000000000 frames"):
+        parse_bvh(huge)
+
+
 def test_bytes_text_and_a_byte_order_mark_read_the_same_numbers() -> None:
     rows = [f"{i / 7!r} {-i / 3:.6f} {i * 1e-20:e}" for i in range(50)]
     text = frames_text(rows)
