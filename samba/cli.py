@@ -65,6 +65,7 @@ from samba.ingest import (
     load_bvh_take,
     read_bvh,
     read_c3d,
+    reader_kernels,
     reference_joints,
     resolve_humanoid,
     rig_of,
@@ -467,7 +468,7 @@ def _warmup(args: argparse.Namespace) -> int:
     if not kernels_enabled():
         print("compiled kernels are off (SAMBA_KERNELS=numpy, or numba is not installed)")
         return 0
-    for kernels in (reconstruction_kernels(), index_kernels()):
+    for kernels in (reconstruction_kernels(), index_kernels(), reader_kernels()):
         cached = kernels.is_cached()
         seconds = kernels.warm_up(sys.stdout)
         print(f"{kernels.name} kernels {'loaded' if cached else 'compiled'} in {seconds:.1f} s")

@@ -51,4 +51,8 @@ def test_warmup_loads_or_compiles_every_kernel_set(capsys: pytest.CaptureFixture
     assert main(["warmup"]) == 0
     lines = capsys.readouterr().out.splitlines()
     finished = [line for line in lines if " kernels " in line and line.endswith(" s")]
-    assert [line.split(" kernels ")[0] for line in finished] == ["reconstruction", "pose index"]
+    assert [line.split(" kernels ")[0] for line in finished] == [
+        "reconstruction",
+        "pose index",
+        "BVH reader",
+    ]
