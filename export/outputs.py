@@ -40,23 +40,34 @@ def format_of(path: Path) -> str:
     )
 
 
-def output_paths(takes: list[str], output: Path, fmt: str) -> list[tuple[str, Path]]:
-    """Each take with the file it goes to: OUT itself for one take (unless OUT is an
-    existing folder), else OUT/<take name><suffix> (the folder is created)."""
-    suffix = FORMAT_SUFFIXES[fmt][0]
-    if len(takes) == 1 and not output.is_dir():
+def output_paths(
+    takes: list[str], fmt: str, output: Path | None, out_dir: Path | None
+) -> list[tuple[str, Path]]:
+    """Each take with the file it goes to: `output` (`-o`) for one take, else
+    `out_dir`/<take name><suffix> (`--out-dir`, created when missing). `ExportError`
+    naming the flag when several takes would go to one file or to the same name, when
+    `output` is a folder or has another format's suffix, or `out_dir` is a file."""
+    if output is not None:
+        if len(takes) > 1:
+            raise ExportError(
+                "--output", f"{len(takes)} takes cannot go to one file; give --out-dir DIR"
+            )
+        if output.is_dir():
+            raise ExportError(str(output), "is a folder; give --out-dir to write into it")
         if output.suffix.lower() not in FORMAT_SUFFIXES[fmt]:
             raise ExportError(
                 str(output), f"a {fmt} file must end in {' or '.join(FORMAT_SUFFIXES[fmt])}"
             )
         return [(takes[0], output)]
-    if output.exists() and not output.is_dir():
-        raise ExportError(str(output), "several takes need an output folder, this is a file")
-    output.mkdir(parents=True, exist_ok=True)
-    paths = [(ref, output / f"{Path(ref).stem}{suffix}") for ref in takes]
+    assert out_dir is not None
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ExportError(str(out_dir), "--out-dir names a file; give a folder")
+    suffix = FORMAT_SUFFIXES[fmt][0]
+    paths = [(ref, out_dir / f"{Path(ref).stem}{suffix}") for ref in takes]
     names = [p for _, p in paths]
     if len(set(names)) != len(names):
-        raise ExportError(str(output), "two takes would be written to the same file name")
+        twice = next(p for p in names if names.count(p) > 1)
+        raise ExportError(str(twice), "two takes would be written to this one file")
     return paths
 
 

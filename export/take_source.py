@@ -9,14 +9,16 @@ import numpy as np
 from samba.body import N_JOINTS, Take
 from samba.db import PoseStore
 from samba.export.errors import ExportError
-from samba.ingest import BvhImportOptions, load_bvh_take, read_take
+from samba.ingest import BvhImportOptions, RigMap, load_bvh_take, read_take
 
 
-def load_take(ref: str, store: str | None = None, skip_tpose: bool = False) -> Take:
+def load_take(
+    ref: str, store: str | None = None, skip_tpose: bool = False, rig: RigMap | None = None
+) -> Take:
     """The take named by `ref`: a take name or id of the pose store at `store`, or
-    without a store a BVH file path (read at its own frame rate, any supported rig; its
-    leading T-pose frames dropped with `skip_tpose`) or an MCAP take recorded by the live
-    service (`samba.ingest.mcap_take.read_take`).
+    without a store a BVH file path (read at its own frame rate, its joints by `rig` or
+    any rig detected; its leading T-pose frames dropped with `skip_tpose`) or an MCAP
+    take recorded by the live service (`samba.ingest.mcap_take.read_take`).
 
     Store takes whose near-duplicate poses were dropped on import get the missing
     frames back by linear interpolation, so the take plays at its recorded speed.
@@ -31,7 +33,7 @@ def load_take(ref: str, store: str | None = None, skip_tpose: bool = False) -> T
         raise ExportError(
             ref, "not a .bvh file or .mcap take; to export a take of a pose store, give --db STORE"
         )
-    return load_bvh_take(path, BvhImportOptions(fps=None, skip_tpose=skip_tpose))
+    return load_bvh_take(path, BvhImportOptions(fps=None, skip_tpose=skip_tpose, rig=rig))
 
 
 def _store_take(store: PoseStore, ref: str) -> Take:

@@ -131,8 +131,11 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
     first = 0
     if tpose and options.skip_tpose:
         positions, first = positions[tpose:], tpose
-    elif tpose:
-        warnings.append(f"starts with {tpose} T-pose frame(s); --skip-tpose drops them")
+    elif tpose:  # counted in the file's frames, whatever rate the take is read at
+        held = int(np.ceil(times[tpose] - 1e-9))
+        warnings.append(
+            f"starts with {held} T-pose frame(s) ({held / bvh.fps:.2f} s); --skip-tpose drops them"
+        )
     positions, tilt = level_floor(positions, fps)
     if tilt > 1.0:
         warnings.append(f"capture floor tilted {tilt:.1f} degrees: levelled")

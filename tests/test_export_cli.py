@@ -78,7 +78,7 @@ def test_several_takes_go_to_a_folder_and_a_bad_one_does_not_stop_the_rest(
     broken = tmp_path / "broken.bvh"
     broken.write_text("HIERARCHY\nROOT Hips\n{\n")
     out = tmp_path / "out"
-    assert run(*bvh_takes, broken, "--format", "bvh", "-o", out) == 1
+    assert run(*bvh_takes, broken, "--format", "bvh", "--out-dir", out) == 1
     assert sorted(p.name for p in out.iterdir()) == ["kick.bvh", "walk.bvh"]
     err = capsys.readouterr().err
     assert str(broken) in err and "1 of 3 takes failed" in err
@@ -92,7 +92,7 @@ def test_several_takes_go_to_a_folder_and_a_bad_one_does_not_stop_the_rest(
         (["--avatar", "{tmp}/none.vrm"], "none.vrm: cannot read the file"),
         (["-o", "{tmp}/walk.fbx"], "walk.fbx: cannot tell the format"),
         (["--format", "glb", "-o", "{tmp}/walk.usda"], "a glb file must end in .glb"),
-        (["-o", "{tmp}/missing/walk.glb"], "missing/walk.glb: cannot write"),
+        (["-o", "{tmp}/missing/walk.glb"], "missing/walk.glb: its folder"),
     ],
 )
 def test_bad_input_is_named_and_nothing_is_left_behind(
@@ -181,3 +181,54 @@ def test_skip_tpose_drops_the_leading_t_pose_frames_the_warning_names(
     assert run(source, "-o", tmp_path / "dropped.bvh", "--skip-tpose") == 0
     out = capsys.readouterr()
     assert "37 frames at 30 fps" in out.out and "T-pose" not in out.err
+
+
+def test_one_file_is_never_overwritten_without_force(
+    tmp_path: Path, bvh_takes: list[Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    victim = tmp_path / "victim.glb"
+    victim.write_bytes(b"somebody's work")
+    assert run(bvh_takes[0], "-o", victim) == 1
+    err = capsys.readouterr().err
+    assert err == f"samba: error: {victim}: already exists; --force overwrites\n"
+    assert victim.read_bytes() == b"somebody's work"
+    assert run(bvh_takes[0], "-o", victim, "--force") == 0
+    assert read_glb_joint_positions(victim)[1].shape == (90, 17, 3)
+
+
+def test_a_take_is_never_written_over_its_own_source_even_with_force(
+    tmp_path: Path, bvh_takes: list[Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    source = tmp_path / "self.bvh"
+    source.write_bytes(bvh_takes[0].read_bytes())
+    link = tmp_path / "link.bvh"
+    link.symlink_to(source)
+    for out in (source, link):
+        assert run(source, "--format", "bvh", "-o", out, "--force") == 1
+        err = capsys.readouterr().err
+        assert err.startswith(f"samba: error: {out}: is an input of this command")
+        assert err.count("\n") == 1
+    assert source.read_bytes() == bvh_takes[0].read_bytes()
+
+
+def test_several_takes_never_overwrite_files_in_the_folder_without_force(
+    tmp_path: Path, bvh_takes: list[Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder = tmp_path / "exports"
+    folder.mkdir()
+    (folder / "kick.bvh").write_text("mine")
+    assert run(*bvh_takes, "--format", "bvh", "--out-dir", folder) == 1
+    err = capsys.readouterr().err
+    assert err == f"samba: error: {folder / 'kick.bvh'}: already exists; --force overwrites\n"
+    assert sorted(p.name for p in folder.iterdir()) == ["kick.bvh"]  # nothing written
+    assert run(*bvh_takes, "--format", "bvh", "--out-dir", folder, "--force") == 0
+    assert read_bvh(folder / "kick.bvh").n_frames == 60
+
+
+def test_several_takes_to_one_file_is_an_error(
+    tmp_path: Path, bvh_takes: list[Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert run(*bvh_takes, "-o", tmp_path / "two.glb") == 1
+    err = capsys.readouterr().err
+    assert err == "samba: error: --output: 2 takes cannot go to one file; give --out-dir DIR\n"
+    assert not list(tmp_path.iterdir())

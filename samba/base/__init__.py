@@ -1,7 +1,8 @@
 """What every Samba package stands on: the error types a user sees (`SambaError`,
 `InputError`: one line naming the input and the problem), atomic file writes, the
-command-line argument types the `samba` subcommands share, and numba kernels compiled once
-per install (`KernelSet`, `compiled`, `kernels_enabled`).
+command-line argument types the `samba` subcommands share, the rule they write outputs
+by (`check_outputs`: never over a file without `--force`, never over an input), and
+numba kernels compiled once per install (`KernelSet`, `compiled`, `kernels_enabled`).
 """
 
 from samba.base.arguments import (
@@ -16,14 +17,18 @@ from samba.base.arguments import (
 from samba.base.atomic_file import atomic_path, write_bytes_atomic, write_text_atomic
 from samba.base.compiled_kernels import KernelSet, compiled, kernels_enabled, usable_cores
 from samba.base.errors import InputError, SambaError
+from samba.base.output_files import FORCE_HINT, add_force_argument, check_outputs
 
 __all__ = [
+    "FORCE_HINT",
     "InputError",
     "KernelSet",
     "SambaError",
+    "add_force_argument",
     "address",
     "atomic_path",
     "bind_address",
+    "check_outputs",
     "compiled",
     "finite_float",
     "kernels_enabled",
