@@ -253,7 +253,7 @@ def run(
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     argv = [sys.executable, "-m", "samba.cli", "serve", "--config", str(config)]
-    argv += ["--udp", f"127.0.0.1:{port}", "--http", "127.0.0.1:0", "--takes", str(tmp)]
+    argv += ["--udp", f"127.0.0.1:{port}", "--http", "127.0.0.1:0", "--out-dir", str(tmp)]
     argv += ["--workers", str(workers), "--max-sessions", str(sessions)]
     server = subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, text=True)
     try:

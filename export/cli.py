@@ -48,7 +48,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--avatar",
         metavar="FILE",
         help="a humanoid avatar whose skeleton the takes are put on: glTF (.glb, .gltf), "
-        "VRM (.vrm) or USD (.usd, .usda, .usdc, .usdz)",
+        "VRM (.vrm) or USD (.usd, .usda, .usdc, .usdz) (default: the built-in mannequin)",
     )
     parser.add_argument(
         "--fps",
@@ -60,7 +60,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--range",
         metavar="A:B",
         dest="frame_range",
-        help="export only frames A..B-1 of each take (either end may be left out)",
+        help="export only frames A..B-1 of each take, either end may be left out (default: all)",
     )
     parser.add_argument(
         "--skip-tpose",

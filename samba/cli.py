@@ -2,8 +2,8 @@
 
 `AREAS` says what each `samba X` runs: the function that adds its arguments, which lives
 in the `cli` module of the package that owns the area (`samba.db.cli`, `samba.ingest.cli`,
-`samba.export.cli`, `samba.service.cli.*`); the capture-math areas (`eval`, `calibrate`)
-are parsed here. Every `cli` module only parses arguments and calls its package's API.
+`samba.export.cli`, `samba.service.cli.*`, `samba.cameras.cli` for `calibrate`); `eval`
+is parsed here. Every `cli` module only parses arguments and calls its package's API.
 This module is the top layer: it may import every package, and none imports it.
 
 A `SambaError` (or an operating system error such as a full disk) is printed as one
@@ -19,29 +19,19 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import numpy as np
 from threadpoolctl import threadpool_limits
-from tqdm import tqdm
 
 from samba.base import (
     InputError,
     SambaError,
+    add_force_argument,
+    check_outputs,
     kernels_enabled,
-    natural,
     positive,
     seconds_range,
     write_text_atomic,
 )
-from samba.cameras import (
-    BOARD_SPEC_HELP,
-    WORLDS,
-    calibrate_lens_recording,
-    calibrate_recordings,
-    camera_table,
-    convert_calibration,
-    parse_board,
-    write_calibration,
-)
+from samba.cameras import cli as calibrate_cli
 from samba.db import PoseIndex, index_kernels
 from samba.db import cli as store_cli
 from samba.evaluation import (
@@ -59,7 +49,9 @@ from samba.evaluation import (
 from samba.export import avatar_humanoid
 from samba.export import cli as export_cli
 from samba.ingest import (
+    BvhImportOptions,
     MarkerSet,
+    RigMap,
     detect_rig,
     expand_paths,
     load_bvh_take,
@@ -91,20 +83,23 @@ def _register_db(parser: argparse.ArgumentParser) -> None:
     )
     rig.add_argument("file", help="a BVH file, or an avatar (.glb, .gltf, .vrm, .usd*)")
     rig.add_argument(
-        "--write-map", metavar="OUT.toml", help="write the 13-joint mapping file (never overwrites)"
+        "--write-map",
+        metavar="FILE.toml",
+        help="write the 13-joint mapping file (default: print the mapping only)",
     )
+    add_force_argument(rig)
     rig.set_defaults(run=_rig)
 
 
 def _rig(args: argparse.Namespace) -> int:
     path = Path(args.file)
-    if args.write_map and Path(args.write_map).exists():
-        raise InputError(args.write_map, "already exists; mapping files are never overwritten")
+    if args.write_map:
+        check_outputs([args.write_map], args.force, [path])
     if path.suffix.lower() == ".bvh":
         bvh = read_bvh(path)
         tree = bvh.skeleton()
+        humanoid = resolve_humanoid(tree, str(path))  # what it cannot place, said plainly
         rig, _ = detect_rig(bvh.names, str(path), lambda: tree)
-        humanoid = resolve_humanoid(tree, str(path))
         found = f"rig {rig.name}"
     else:
         humanoid = avatar_humanoid(path)
@@ -140,43 +135,72 @@ def _register_eval(parser: argparse.ArgumentParser) -> None:
         metavar="NAME,...",
         help=f"methods to compare (default {','.join(METHODS)})",
     )
-    parser.add_argument("--K", type=positive, help="neighbours K for every method but nn")
-    parser.add_argument("--N", type=positive, help="pseudo-poses N for every method but nn")
+    parser.add_argument(
+        "--K",
+        type=positive,
+        metavar="K",
+        help="neighbours K for every method but nn (default: each method's own)",
+    )
+    parser.add_argument(
+        "--N",
+        type=positive,
+        metavar="N",
+        help="pseudo-poses N for every method but nn (default: each method's own)",
+    )
     parser.add_argument(
         "--dropout",
         type=_fraction,
         default=0.0,
-        help="fraction of marker observations missing at random from frame 2 on (e.g. 0.1)",
+        metavar="F",
+        help="fraction of marker observations missing at random from frame 2 on, e.g. 0.1 "
+        "(default 0)",
     )
     parser.add_argument(
         "--new-user",
         action="store_true",
-        help="scale the test bodies' limbs by random factors in [0.9, 1.1]",
+        help="scale the test bodies' limbs by random factors in [0.9, 1.1] (default: as recorded)",
     )
     parser.add_argument(
-        "--seed", type=int, default=0, help="capture seed; test take i uses seed + i"
+        "--seed",
+        type=int,
+        default=0,
+        metavar="N",
+        help="capture seed; test take i uses seed + i (default 0)",
     )
-    parser.add_argument("--json", metavar="OUT", help="write settings and summaries as JSON")
-    parser.add_argument("--plots", metavar="DIR", help="write PNG plots into this folder")
+    parser.add_argument(
+        "--json", metavar="FILE", help="write settings and summaries as JSON (default: none)"
+    )
+    parser.add_argument(
+        "--plots", metavar="DIR", help="write PNG plots into this folder (default: none)"
+    )
+    add_force_argument(parser)
     parser.add_argument(
         "--sweep-k",
         type=_int_list,
         default=[],
         metavar="K,...",
-        help="also run samba with these K (the paper's Fig. 8), e.g. 1,2,5,10,20,30,50",
+        help="also run samba with these K (the paper's Fig. 8), e.g. 1,2,5,10,20,30,50 "
+        "(default: none)",
     )
     parser.add_argument(
         "--sweep-n",
         type=_int_list,
         default=[],
         metavar="N,...",
-        help="also run samba with these N for K = 10, 20, 30 (Fig. 9), e.g. 1,2,5,10,20",
+        help="also run samba with these N for K = 10, 20, 30 (Fig. 9), e.g. 1,2,5,10,20 "
+        "(default: none)",
     )
     parser.add_argument(
         "--max-frames",
         type=positive,
         metavar="F",
-        help="evaluate only the first F frames of each test take",
+        help="evaluate only the first F frames of each test take (default: all)",
+    )
+    parser.add_argument(
+        "--map",
+        metavar="FILE.toml",
+        help="joint mapping file for BVH files of a rig not recognised (samba db rig "
+        "--write-map writes one; default: detected)",
     )
     real = parser.add_argument_group("real marker takes (C3D)")
     real.add_argument(
@@ -222,26 +246,30 @@ def _fraction(text: str) -> float:
     return value
 
 
-def _bvh_files(paths: Sequence[str], flag: str) -> list[Path]:
-    """The BVH files under paths (folders searched), resolved, each once."""
-    files = list(dict.fromkeys(p.resolve() for p in expand_paths(paths)))
+def _bvh_files(paths: Sequence[str], flag: str, spelling: dict[Path, Path]) -> list[Path]:
+    """The BVH files under paths (folders searched), each once, spelt as typed: a file
+    reached twice (through a link, or spelt two ways) keeps the spelling `spelling`
+    (resolved path -> path as typed) first saw."""
+    files = list(dict.fromkeys(spelling.setdefault(p.resolve(), p) for p in expand_paths(paths)))
     if not files:
         raise InputError(f"{flag} {' '.join(paths)}", "no .bvh files found")
     return files
 
 
-def _test_files(paths: Sequence[str]) -> tuple[list[Path], list[Path]]:
-    """The BVH and the C3D files under the --test paths (folders searched)."""
+def _test_files(paths: Sequence[str], spelling: dict[Path, Path]) -> tuple[list[Path], list[Path]]:
+    """The BVH and the C3D files under the --test paths (folders searched), each once,
+    spelt as `_bvh_files` spells them."""
     named = [Path(p) for p in paths]
     c3d = [p for p in named if p.suffix.lower() == ".c3d"]
     c3d += [
         f for p in named if p.is_dir() for f in sorted(p.rglob("*")) if f.suffix.lower() == ".c3d"
     ]
     rest = [str(p) for p in named if p.suffix.lower() != ".c3d"]
-    found = [p.resolve() for p in expand_paths(rest)] if rest else []
+    found = [spelling.setdefault(p.resolve(), p) for p in expand_paths(rest)] if rest else []
     if not found and not c3d:
         raise InputError(f"--test {' '.join(paths)}", "no .bvh or .c3d files found")
-    return list(dict.fromkeys(found)), list(dict.fromkeys(p.resolve() for p in c3d))
+    c3d = [spelling.setdefault(p.resolve(), p) for p in c3d]
+    return list(dict.fromkeys(found)), list(dict.fromkeys(c3d))
 
 
 def _marker_tests(
@@ -259,18 +287,23 @@ def _marker_tests(
 
 def _eval(args: argparse.Namespace) -> int:
     if args.plots:
-        if Path(args.plots).exists() and not Path(args.plots).is_dir():
+        plots = Path(args.plots)
+        if plots.exists() and not plots.is_dir():
             raise InputError("--plots", f"{args.plots} is a file; plots go into a folder")
-        Path(args.plots).mkdir(parents=True, exist_ok=True)
-    if args.json and not Path(args.json).resolve().parent.is_dir():
-        raise InputError("--json", f"folder of {args.json} does not exist")
-    train = _bvh_files(args.train, "--train")
-    test, c3d = _test_files(args.test)
+        check_outputs(sorted(plots.glob("*.png")), args.force)  # plots written before
+        plots.mkdir(parents=True, exist_ok=True)
+    if args.json:
+        check_outputs([args.json], args.force, [*args.train, *args.test])
+    spelling: dict[Path, Path] = {}
+    train = _bvh_files(args.train, "--train", spelling)
+    test, c3d = _test_files(args.test, spelling)
     real = _marker_tests(c3d, args.marker_set, args.max_frames)
     files = list(dict.fromkeys(train + test))
     stems = [f.stem for f in files]  # a take is named by its file stem, or its path if not unique
+    options = BvhImportOptions(rig=RigMap.from_toml(args.map) if args.map else None)
     takes = {
-        f: (f.stem if stems.count(f.stem) == 1 else str(f), load_bvh_take(f).poses) for f in files
+        f: (f.stem if stems.count(f.stem) == 1 else str(f), load_bvh_take(f, options).poses)
+        for f in files
     }
     train_takes = [takes[f] for f in train]
     test_takes = [(name, poses[: args.max_frames]) for name, poses in (takes[f] for f in test)]
@@ -314,150 +347,6 @@ def _eval(args: argparse.Namespace) -> int:
     return 0
 
 
-def _register_calibrate(parser: argparse.ArgumentParser) -> None:
-    """`samba calibrate`: cameras from their recordings of a board, one camera's lens
-    alone (--intrinsics-only), or another calibration converted (--convert)
-    (`samba.cameras`)."""
-    parser.add_argument(
-        "sources",
-        nargs="*",
-        metavar="IMAGES_OR_VIDEO",
-        help="one per camera: a folder of images (frames in file-name order) or a video file",
-    )
-    parser.add_argument(
-        "--board", metavar="SPEC", help=f"the board (required unless --convert): {BOARD_SPEC_HELP}"
-    )
-    parser.add_argument(
-        "-o",
-        "--output",
-        required=True,
-        metavar="CALIB.toml",
-        help="calibration file to write (never overwritten)",
-    )
-    parser.add_argument(
-        "--intrinsics-only",
-        action="store_true",
-        help="one camera's lens alone (focal lengths, principal point, distortion) from "
-        "its photos or video, e.g. a phone or webcam; the camera is written at the origin",
-    )
-    parser.add_argument(
-        "--convert",
-        metavar="IN",
-        help="write the calibration IN (our TOML, anipose / Pose2Sim / FreeMoCap TOML, "
-        "Qualisys .qca / .qca.txt, an EasyMocap folder with intri.yml and extri.yml) as "
-        "ours, meters and +Y up; takes no images and no --board",
-    )
-    parser.add_argument(
-        "--world",
-        choices=WORLDS,
-        help="board: the board lies face up on the floor in --floor-frame, which becomes "
-        "y = 0 with the origin at its first corner; camera0: the first camera at the "
-        "origin looking along -Z (default board)",
-    )
-    parser.add_argument(
-        "--floor-frame",
-        type=natural,
-        metavar="N",
-        help="frame in which the board lies on the floor (default: the first frame in "
-        "which any camera sees the board)",
-    )
-    parser.add_argument(
-        "--every",
-        type=positive,
-        default=1,
-        metavar="N",
-        help="use every N-th frame only (frame numbers keep counting all frames)",
-    )
-    parser.add_argument(
-        "--refine-intrinsics",
-        action="store_true",
-        help="also refine focal lengths, principal points and distortion in the joint "
-        "adjustment (slower; helps when each camera saw the board in few images)",
-    )
-    parser.add_argument(
-        "-v",
-        "--verbose",
-        action="store_true",
-        help="print per image which detector found the board, or why none did",
-    )
-    parser.set_defaults(run=_calibrate)
-
-
-def _calibrate(args: argparse.Namespace) -> int:
-    output = Path(args.output)
-    if not output.resolve().parent.is_dir():
-        raise InputError("--output", f"folder of {output} does not exist")
-    _check_calibrate_flags(args)
-    if output.exists():
-        raise InputError(str(output), "already exists; calibration files are never overwritten")
-    if args.convert:
-        cameras = convert_calibration(args.convert, output)
-        print("\n".join(camera_table(cameras)))
-        print(f"wrote {output} from {args.convert}")
-        return 0
-    board = parse_board(args.board)
-    log = tqdm.write if args.verbose else None
-    if args.intrinsics_only:
-        calibration = calibrate_lens_recording(args.sources[0], board, args.every, log)
-    else:
-        calibration = calibrate_recordings(
-            args.sources,
-            board,
-            world=args.world or "board",
-            floor_frame=args.floor_frame,
-            every=args.every,
-            refine_intrinsics=args.refine_intrinsics,
-            log=log,
-        )
-    print(calibration.report())
-    result = calibration.result
-    write_calibration(output, result.cameras, error_px=float(np.mean(result.rms_px)))
-    print(f"wrote {output}")
-    return 0
-
-
-def _check_calibrate_flags(args: argparse.Namespace) -> None:
-    """InputError naming the flag for a combination `samba calibrate` cannot run."""
-    if args.convert:
-        if args.sources:
-            raise InputError(
-                "--convert", f"takes no images or videos (got {' '.join(args.sources)})"
-            )
-        given = {
-            "--board": args.board is not None,
-            "--intrinsics-only": args.intrinsics_only,
-            "--world": args.world is not None,
-            "--floor-frame": args.floor_frame is not None,
-            "--every": args.every != 1,
-            "--refine-intrinsics": args.refine_intrinsics,
-        }
-        for flag, present in given.items():
-            if present:
-                raise InputError(flag, "does not apply to --convert")
-        return
-    if not args.sources:
-        raise InputError(
-            "IMAGES_OR_VIDEO", "give a folder of images or a video per camera, or --convert IN"
-        )
-    if args.board is None:
-        raise InputError("--board", "required to calibrate from images or videos")
-    if args.intrinsics_only:
-        if len(args.sources) > 1:
-            raise InputError(
-                "--intrinsics-only",
-                f"takes one camera's images or video, got {len(args.sources)}: "
-                f"{' '.join(args.sources)}",
-            )
-        given = {
-            "--world": args.world is not None,
-            "--floor-frame": args.floor_frame is not None,
-            "--refine-intrinsics": args.refine_intrinsics,
-        }
-        for flag, present in given.items():
-            if present:
-                raise InputError(flag, "does not apply to --intrinsics-only (no world, one camera)")
-
-
 def _register_warmup(parser: argparse.ArgumentParser) -> None:
     """`samba warmup`: compile (the first run after an install) or load every compiled
     kernel now, ahead of a live session."""
@@ -485,7 +374,7 @@ AREAS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], str]] = {
         "accuracy and speed of every reconstruction method on BVH and real marker (C3D) takes",
     ),
     "calibrate": (
-        _register_calibrate,
+        calibrate_cli.register,
         "calibrate cameras (or one lens) from images or videos of a board; convert calibrations",
     ),
     "reconstruct": (
@@ -544,7 +433,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     for name, (register, help_text) in AREAS.items():
         register(sub.add_parser(name, help=help_text, description=help_text))
+    _describe(parser)
     return parser
+
+
+def _describe(parser: argparse.ArgumentParser) -> None:
+    """Give every subcommand of `parser`'s tree without a description of its own its
+    one-line help as one, so `samba X Y --help` always says what Y does."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            helps = {choice.dest: choice.help for choice in action._choices_actions}
+            for name, sub in action.choices.items():
+                if not sub.description and helps.get(name):
+                    sub.description = f"{helps[name][0].upper()}{helps[name][1:]}."
+                _describe(sub)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

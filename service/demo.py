@@ -15,6 +15,10 @@
    mannequin; a summary of frames, latency, accuracy against the truth (for a marker
    take, which has no true joints: how high the recorded shoulders went, beside the
    take's shoulder markers) and files written.
+
+Every file stays in the demo's folder (`./samba-demo` unless `--out-dir` names
+another); a folder that holds an earlier demo's files is refused, or with `--force`
+cleared of them (`demo_outputs`) first.
 """
 
 from __future__ import annotations
@@ -22,8 +26,8 @@ from __future__ import annotations
 import asyncio
 import os
 import secrets
+import shutil
 import sys
-import tempfile
 import time
 import webbrowser
 from dataclasses import dataclass
@@ -31,10 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
+from samba.base import FORCE_HINT, InputError
 from samba.cameras import write_calibration
 from samba.db import PoseStore, build_synthetic_store
 from samba.export import Avatar, load_avatar, retarget, write_export
-from samba.ingest import BvhImportOptions, MarkerSet, load_bvh_take, read_take
+from samba.ingest import BvhImportOptions, MarkerSet, RigMap, load_bvh_take, read_take
 from samba.service.marker_motion import MarkerMotion, is_marker_file
 from samba.service.node_keys import NodeKey, NodeKeys
 from samba.service.serve import LiveServer
@@ -46,6 +51,8 @@ from samba.service.vmc import MARIONETTE_PORT
 from samba.synthetic import MOTIONS
 
 SESSION = "demo"
+DEFAULT_FOLDER = "samba-demo"
+"""The folder, in the working directory, the demo keeps its files in by default."""
 DRAIN_S = 10.0
 """How long the demo waits, after the last packet, for the server to finish the frames."""
 
@@ -55,32 +62,68 @@ class DemoSettings:
     """What `run_demo` plays: `motion` (a built-in motion's name, a BVH file or a C3D
     file, its markers by the marker-set file `marker_set`, None: Plug-in-Gait's) for
     `seconds` at `fps` camera frames per second; the pose store `db` (None: built from
-    the built-in motions); VMC also to `vmc` (host, port); files kept in `out` (None: a
-    temporary folder); the viewer opened in a browser when `open_viewer`; `seed` of the
-    database and the capture; `avatar` the avatar file streamed and exported onto."""
+    the built-in motions); VMC also to `vmc` (host, port); files kept in the folder
+    `out_dir`, an earlier demo's files there replaced when `force`; the viewer opened in
+    a browser when `open_viewer`; `seed` of the database and the capture; `avatar` the
+    avatar file streamed and exported onto; `rig_map` the joints of a BVH motion (None:
+    its rig detected)."""
 
     motion: str = "walk"
     seconds: float = 8.0
     fps: float = 60.0
     db: str | None = None
     vmc: tuple[str, int] = ("127.0.0.1", MARIONETTE_PORT)
-    out: str | None = None
+    out_dir: str = DEFAULT_FOLDER
+    force: bool = False
     open_viewer: bool = False
     seed: int = 0
     avatar: str | None = None
     marker_set: str | None = None
+    rig_map: RigMap | None = None
 
 
 def run_demo(settings: DemoSettings) -> int:
-    """Run the demo in `settings.out` or a temporary folder, printing each step; returns
-    the exit status (0). A motion or marker-set file that cannot be read stops it before
-    it makes anything (`C3dError`, `BvhError`, ...)."""
+    """Run the demo in `settings.out_dir`, printing each step; returns the exit status
+    (0). A motion or marker-set file that cannot be read, or a folder holding an earlier
+    demo's files without `settings.force`, stops it before it makes anything (`C3dError`,
+    `BvhError`, `InputError`, ...)."""
     capture, motion_name = _capture(settings)
-    if settings.out:
-        Path(settings.out).mkdir(parents=True, exist_ok=True)
-        return asyncio.run(_demo(Path(settings.out), settings, capture, motion_name))
-    with tempfile.TemporaryDirectory(prefix="samba-demo-") as folder:
-        return asyncio.run(_demo(Path(folder), settings, capture, motion_name))
+    folder = Path(settings.out_dir)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(str(folder), "is a file; the demo keeps its files in a folder")
+    earlier = [p for p in demo_outputs(folder, motion_name, settings.db is None) if p.exists()]
+    if earlier and not settings.force:
+        raise InputError(
+            str(earlier[0]),
+            f"already exists (an earlier demo); {FORCE_HINT} the demo's files, or give "
+            "--out-dir another folder",
+        )
+    for path in earlier:
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
+    folder.mkdir(parents=True, exist_ok=True)
+    return asyncio.run(_demo(folder, settings, capture, motion_name))
+
+
+def demo_outputs(folder: Path, motion_name: str, builds_store: bool) -> list[Path]:
+    """What a demo of `motion_name` writes in `folder`: the pose store (when it builds
+    one), the calibration, the take and its two exports."""
+    take = _take_name(motion_name)
+    return [
+        *([folder / "store"] if builds_store else []),
+        folder / "cameras.toml",
+        folder / "takes" / SESSION / f"{take}.mcap",
+        *_exports(folder, take),
+    ]
+
+
+def _take_name(motion_name: str) -> str:
+    """The name of the take the demo records of `motion_name`."""
+    return f"demo_{motion_name}"
+
+
+def _exports(folder: Path, take: str) -> list[Path]:
+    """The USD and glTF files the take named `take` is exported to in `folder`."""
+    return [folder / "exports" / f"{take}.{suffix}" for suffix in ("usda", "glb")]
 
 
 async def _demo(
@@ -138,7 +181,7 @@ async def _demo(
         print(f"   control API: {live.http_url}/api/health, Authorization: Bearer {live.token}")
         if settings.open_viewer and _has_display():
             webbrowser.open(viewer)
-        take = session.start_take(f"demo_{motion_name}")
+        take = session.start_take(_take_name(motion_name))
         print(
             f"3. two camera nodes play {capture.frames} frames of {motion_name} "
             f"({capture.frames / settings.fps:.1f} s at {settings.fps:g} fps), "
@@ -186,7 +229,7 @@ def _capture(settings: DemoSettings) -> tuple[SyntheticCapture, str]:
         )
         return capture, settings.motion
     path = Path(settings.motion)
-    take = load_bvh_take(path, BvhImportOptions(fps=settings.fps))
+    take = load_bvh_take(path, BvhImportOptions(fps=settings.fps, rig=settings.rig_map))
     take.poses = take.poses[: round(settings.seconds * settings.fps)]
     return SyntheticCapture.of_take(take, dropout=0.02, seed=settings.seed), path.stem
 
@@ -225,13 +268,14 @@ def _report(
             f"{error[:, [0, 3, 4, 7, 8]].mean():.1f} cm"
         )
     motion = retarget(recorded.poses, avatar.rig, recorded.fps)
-    outputs = [folder / "exports" / f"{take_path.stem}.{s}" for s in ("usda", "glb")]
+    outputs = _exports(folder, take_path.stem)
     outputs[0].parent.mkdir(exist_ok=True)
     for out, fmt in zip(outputs, ("usd", "glb"), strict=True):
         write_export(fmt, out, motion, avatar.mesh, "m")
     print(f"4. files: take {take_path} ({take_path.stat().st_size / 1e3:.0f} kB)")
     for out in outputs:
         print(f"   export {out} ({out.stat().st_size / 1e3:.0f} kB, {len(motion)} frames)")
+    print(f"   all kept in {folder}/ (the next demo there needs --force or another --out-dir)")
     sys.stdout.flush()
 
 

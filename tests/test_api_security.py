@@ -259,7 +259,7 @@ def test_the_token_file_is_the_owners_only(
     argv = [sys.executable, "-m", "samba.cli", "serve", "--calib", str(live_calibration)]
     argv += ["--db", str(live_store), "--udp", f"127.0.0.1:{free_udp_port()}"]
     argv += ["--http", "127.0.0.1:0", "--token-file", str(token_file), "--duration", "1"]
-    argv += ["--takes", str(tmp_path / "takes")]
+    argv += ["--out-dir", str(tmp_path / "takes")]
     env = {k: v for k, v in os.environ.items() if k != "SAMBA_TOKEN"}
     done = subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, timeout=120, env=env)
     assert done.returncode == 0, done.stderr
@@ -268,7 +268,7 @@ def test_the_token_file_is_the_owners_only(
     assert stat.S_IMODE(token_file.stat().st_mode) == 0o600
     assert f"the token in {token_file}" in done.stdout
     printed = subprocess.run(
-        [*argv[: argv.index("--token-file")], "--duration", "1", "--takes", str(tmp_path)],
+        [*argv[: argv.index("--token-file")], "--duration", "1", "--out-dir", str(tmp_path)],
         capture_output=True,
         text=True,
         cwd=ROOT,

@@ -208,9 +208,9 @@ def test_intrinsics_only_writes_one_camera_at_the_origin(
     assert lens.name == "webcam" and lens.size == camera.size
     assert abs(lens.matrix[0, 0] / camera.matrix[0, 0] - 1) < 0.01
     np.testing.assert_array_equal(lens.center, 0.0)
-    assert main(argv) == 1  # never overwritten
+    assert main(argv) == 1  # never overwritten without --force
     assert capsys.readouterr().err.strip() == (
-        f"samba: error: {output}: already exists; calibration files are never overwritten"
+        f"samba: error: {output}: already exists; --force overwrites"
     )
 
 

@@ -188,3 +188,25 @@ def test_sweep_points_reuse_equal_runs() -> None:
     ]
     assert list(runs) == ["samba", "nn", "samba K=5 N=10", "samba K=20 N=10", "samba K=30 N=10"]
     assert runs["samba K=20 N=10"].config.k == 20
+
+
+def test_an_error_names_the_file_as_typed_not_where_a_link_leads(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    real = tmp_path / "real"
+    real.mkdir()
+    (real / "broken.bvh").write_text("HIERARCHY\nROOT Hips\n{\n")
+    typed = tmp_path / "link" / "broken.bvh"
+    (tmp_path / "link").symlink_to(real)
+    code, _, err = run(capsys, "eval", "--train", str(typed), "--test", str(typed))
+    assert code == 1 and err.startswith(f"samba: error: {typed}:"), err
+
+
+def test_an_existing_json_is_not_overwritten_without_force(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    kept = tmp_path / "results.json"
+    kept.write_text("earlier results")
+    code, _, err = run(capsys, "eval", "--train", "x.bvh", "--test", "x.bvh", "--json", str(kept))
+    assert code == 1 and err == f"samba: error: {kept}: already exists; --force overwrites\n"
+    assert kept.read_text() == "earlier results"

@@ -126,7 +126,7 @@ def test_the_demo_plays_the_take_and_records_real_motion(
     code = main(
         [
             *("demo", "--motion", str(stage.file), "--db", str(live_store)),
-            *("--out", str(tmp_path), "--seconds", str(seconds), "--fps", str(fps)),
+            *("--out-dir", str(tmp_path), "--seconds", str(seconds), "--fps", str(fps)),
             *("--vmc", "127.0.0.1:9"),
         ]
     )
@@ -191,7 +191,7 @@ def test_bad_marker_takes_are_one_line_errors(
             *("--server", "127.0.0.1:9", "--no-pace"),
         ]
         if command == "node"
-        else ["demo", "--motion", motion, "--out", str(out), "--vmc", "127.0.0.1:9"]
+        else ["demo", "--motion", motion, "--out-dir", str(out), "--vmc", "127.0.0.1:9"]
     )
     code = main(argv + extra)
     err = capsys.readouterr().err

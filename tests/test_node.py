@@ -263,7 +263,6 @@ def _bad_inputs(rig: Rig, tmp_path: Path) -> dict[str, tuple[list[str], list[str
             [*synthetic, "--key-file", str(short_key)],
             [str(short_key), "16 bytes"],
         ),
-        "two sources": ([*synthetic, "--video", "x.avi"], ["--video", "--synthetic"]),
         "wrong frame size": (["--images", str(small)], ["frame_000000.png", "64x48", "320x240"]),
         "no webcam": (["--webcam", "99"], ["webcam 99"]),
         "flag of another source": (["--webcam", "0", "--loop"], ["--loop", "--webcam"]),
@@ -277,7 +276,6 @@ def _bad_inputs(rig: Rig, tmp_path: Path) -> dict[str, tuple[list[str], list[str
         "camera out of range",
         "missing video",
         "short key file",
-        "two sources",
         "wrong frame size",
         "no webcam",
         "flag of another source",
@@ -294,6 +292,20 @@ def test_bad_inputs_are_one_line_errors(
     assert err.startswith("samba: error: ") and err.count("\n") == 1, err
     for word in named:
         assert word in err
+    assert receiver.datagrams(idle=0.05) == []
+
+
+def test_two_sources_or_none_are_a_usage_error(
+    rig: Rig, receiver: Receiver, capsys: pytest.CaptureFixture[str]
+) -> None:
+    for extra, named in (
+        (["--synthetic", MOTION, "--video", "x.avi"], ["--video", "--synthetic"]),
+        ([], ["one of the arguments --video --images --webcam --synthetic is required"]),
+    ):
+        with pytest.raises(SystemExit) as exit_:
+            main(node(rig, receiver.address, "--camera", "0", *extra))
+        err = capsys.readouterr().err
+        assert exit_.value.code == 2 and all(word in err for word in named), err
     assert receiver.datagrams(idle=0.05) == []
 
 

@@ -295,7 +295,7 @@ def test_samba_serve_command(live_store: Path, live_calibration: Path, tmp_path:
         port = probe.getsockname()[1]
     argv = [sys.executable, "-m", "samba.cli", "serve", "--calib", str(live_calibration)]
     argv += ["--db", str(live_store), "--udp", f"127.0.0.1:{port}", "--no-http"]
-    argv += ["--takes", str(tmp_path / "takes"), "--record", "first", "--duration", "2"]
+    argv += ["--out-dir", str(tmp_path / "takes"), "--record", "first", "--duration", "2"]
     done = subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert done.returncode == 0, done.stderr
     assert f"camera packets on udp 127.0.0.1:{port}" in done.stdout

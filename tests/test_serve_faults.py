@@ -60,7 +60,7 @@ def test_loss_duplication_reordering_and_jitter(
     write_calibration(calibration, long_capture.cameras)
     vmc = VmcReceiver()
     args = ["--calib", str(calibration), "--db", str(live_store), "--session", "stage"]
-    args += ["--wait-ms", "70", "--vmc", vmc.target, "--takes", str(tmp_path), "--record", "f"]
+    args += ["--wait-ms", "70", "--vmc", vmc.target, "--out-dir", str(tmp_path), "--record", "f"]
     with serve_process(*args) as server:
 
         async def run() -> UdpFaultProxy:
@@ -122,7 +122,7 @@ def test_a_camera_node_that_stops_and_restarts_is_picked_up_again(
     write_calibration(calibration, long_capture.cameras)
     n = long_capture.frames
     args = ["--calib", str(calibration), "--db", str(live_store), "--session", "stage"]
-    with serve_process(*args, "--wait-ms", "100", "--takes", str(tmp_path)) as server:
+    with serve_process(*args, "--wait-ms", "100", "--out-dir", str(tmp_path)) as server:
 
         async def run() -> None:
             await asyncio.gather(
@@ -213,7 +213,7 @@ def test_kill_9_mid_take_keeps_the_take_and_the_database(
     before = {
         p: hashlib.sha256(p.read_bytes()).hexdigest() for p in live_store.rglob("*") if p.is_file()
     }
-    args = ["--calib", str(live_calibration), "--db", str(live_store), "--takes", str(tmp_path)]
+    args = ["--calib", str(live_calibration), "--db", str(live_store), "--out-dir", str(tmp_path)]
     args += ["--workers", "2"]
     with serve_process(*args, "--record", "killed", "--session", "stage", http=False) as server:
         asyncio.run(play(live_capture, server.udp, time.time() + 0.2, "stage"))

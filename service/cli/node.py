@@ -83,7 +83,9 @@ def register(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--calib", required=True, metavar="FILE", help="calibration file of the capture stage"
     )
-    source = parser.add_argument_group("source (exactly one)")
+    source = parser.add_argument_group("source (exactly one)").add_mutually_exclusive_group(
+        required=True
+    )
     source.add_argument("--video", metavar="FILE", help="a video file")
     source.add_argument(
         "--images", metavar="DIR", help="a folder of images, frames in file-name order"
@@ -108,7 +110,9 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--key-file",
         metavar="FILE",
         help=f"this node's key (the file's raw bytes, at least {MIN_KEY_BYTES}) to sign "
-        "packets with (HMAC); the server's --keys file lists it for this camera",
+        "packets with (HMAC); the server's keys file (samba serve --keys) lists it for this "
+        "camera (default: "
+        "unsigned packets)",
     )
     timing = parser.add_argument_group("timing")
     timing.add_argument(
@@ -161,15 +165,21 @@ def register(parser: argparse.ArgumentParser) -> None:
         "subject start (video, images, webcam): where the subject stands in the standard "
         "pose when capture begins"
     )
-    subject.add_argument("--start-x", type=finite_float, metavar="M", help="hip midpoint x, m (0)")
-    subject.add_argument("--start-z", type=finite_float, metavar="M", help="hip midpoint z, m (0)")
+    subject.add_argument(
+        "--start-x", type=finite_float, metavar="M", help="hip midpoint x, m (default 0)"
+    )
+    subject.add_argument(
+        "--start-z", type=finite_float, metavar="M", help="hip midpoint z, m (default 0)"
+    )
     subject.add_argument(
         "--heading",
         type=finite_float,
         metavar="DEG",
-        help="facing +Z turned towards +X, degrees (0)",
+        help="facing +Z turned towards +X, degrees (default 0)",
     )
-    subject.add_argument("--height", type=positive_float, metavar="M", help="stature, m (1.70)")
+    subject.add_argument(
+        "--height", type=positive_float, metavar="M", help="stature, m (default 1.70)"
+    )
     parser.add_argument(
         "--threshold",
         type=positive_float,
@@ -186,16 +196,35 @@ def register(parser: argparse.ArgumentParser) -> None:
         "silhouette mode (the subject's --height picks the body model, and a video's or "
         "webcam's subject is tracked at that stature)"
     )
-    markerless.add_argument("--db", metavar="STORE", help="pose store holding the shape tree")
-    markerless.add_argument("--tree", help="shape tree name in the store (default CAMERA-BODY)")
-    markerless.add_argument("--body", help="body model name (default: nearest to --height)")
-    markerless.add_argument("--kind", choices=KINDS, help="men, women or children")
-    markerless.add_argument("--home", metavar="X,Z", help="floor point (m) the subject stands on")
     markerless.add_argument(
-        "--background", metavar="PATH", help="video or images of the empty stage"
+        "--db", metavar="STORE", help="pose store holding the shape tree (needed; no default)"
     )
     markerless.add_argument(
-        "--empty-frames", type=natural, metavar="N", help="the first N frames show the empty stage"
+        "--tree", metavar="NAME", help="shape tree name in the store (default CAMERA-BODY)"
+    )
+    markerless.add_argument(
+        "--body", metavar="NAME", help="body model name (default: nearest to --height)"
+    )
+    markerless.add_argument(
+        "--kind",
+        choices=KINDS,
+        help="with --height: men, women or children (default: the nearest of all)",
+    )
+    markerless.add_argument(
+        "--home",
+        metavar="X,Z",
+        help="floor point (m) the subject stands on (default: where the camera looks)",
+    )
+    markerless.add_argument(
+        "--background",
+        metavar="DIR_OR_VIDEO",
+        help="video or images of the empty stage (default: --empty-frames)",
+    )
+    markerless.add_argument(
+        "--empty-frames",
+        type=natural,
+        metavar="N",
+        help="the first N frames show the empty stage (default: --background)",
     )
     parser.add_argument(
         "--verbose",
@@ -259,13 +288,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _source_of(args: argparse.Namespace) -> str:
-    """The one source flag given; InputError for none, several, or a flag of another source."""
-    given = [name for name in SOURCES if getattr(args, name) is not None]
-    if not given:
-        raise InputError("source", "none given: use --video, --images, --webcam or --synthetic")
-    if len(given) > 1:
-        raise InputError(" and ".join(f"--{name}" for name in given), "give only one source")
-    source = given[0]
+    """The one source flag given (argparse allows exactly one); InputError for a flag of
+    another source or mode."""
+    source = next(name for name in SOURCES if getattr(args, name) is not None)
     for name, sources in _SCOPES.items():
         if name == "height" and args.mode == "silhouette":
             continue  # there it picks the body model, whatever the source

@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from samba.base import InputError, positive_float, seconds_range
+from samba.base import add_force_argument, check_outputs, positive_float, seconds_range
 from samba.export import FORMAT_SUFFIXES, format_of, load_avatar
 from samba.ingest import MarkerSet, read_marker_take
 from samba.ingest.cli import add_marker_set_argument
@@ -28,18 +28,25 @@ def register(parser: argparse.ArgumentParser) -> None:
         "-o",
         "--output",
         required=True,
-        metavar="OUT",
+        metavar="FILE",
         help="file to write: .mcap (a take samba export / db import read), .bvh, .glb or "
-        ".usd[a|c|z] (never overwritten)",
+        ".usd[a|c|z]",
     )
-    parser.add_argument("--format", choices=FORMATS, help="default: from the suffix of OUT")
+    add_force_argument(parser)
     parser.add_argument(
-        "--method", choices=list(METHODS), default="best", help="reconstruction method (best)"
+        "--format", choices=FORMATS, help="output format (default: from the suffix of FILE)"
+    )
+    parser.add_argument(
+        "--method",
+        choices=list(METHODS),
+        default="best",
+        help="reconstruction method (default best)",
     )
     parser.add_argument(
         "--fps",
         type=positive_float,
         default=30.0,
+        metavar="N",
         help="frame rate to reconstruct and write at (default 30, the database's)",
     )
     calibration = parser.add_mutually_exclusive_group()
@@ -53,7 +60,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     calibration.add_argument(
         "--no-calibration",
         action="store_true",
-        help="take the markers as joint centres (markers the project placed itself)",
+        help="take the markers as joint centres (markers the project placed itself; "
+        "default: calibrate)",
     )
     add_marker_set_argument(parser)
     parser.add_argument(
@@ -69,10 +77,7 @@ def run(args: argparse.Namespace) -> int:
     """Reconstruct the take and write it; print the summary. A failed run writes nothing."""
     out = Path(args.output)
     fmt = args.format or ("mcap" if out.suffix.lower() == ".mcap" else format_of(out))
-    if out.exists():
-        raise InputError(str(out), "already exists; outputs are never overwritten")
-    if not out.resolve().parent.is_dir():
-        raise InputError("--output", f"folder of {out} does not exist")
+    check_outputs([out], args.force, [args.take, *([args.avatar] if args.avatar else [])])
     marker_set = MarkerSet.named(args.marker_set)
     avatar = load_avatar(args.avatar)
     take = read_marker_take(args.take, marker_set).resampled(args.fps)

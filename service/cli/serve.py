@@ -35,7 +35,12 @@ def register(parser: argparse.ArgumentParser) -> None:
         "to game engines and to the live viewer, and record takes on request."
     )
     one = parser.add_argument_group("one session from flags (or use --config)")
-    one.add_argument("--config", help="TOML file of [[session]] tables (see docs/live.md)")
+    one.add_argument(
+        "--config",
+        metavar="FILE",
+        help="TOML file of [[session]] tables, see docs/live.md (default: one session from "
+        "the flags below)",
+    )
     one.add_argument(
         "--input",
         choices=INPUTS,
@@ -43,25 +48,51 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="what the nodes send: markers (calibrated cameras, the default) or poses "
         "(one markerless node, samba node --mode silhouette; no --calib or --db)",
     )
-    one.add_argument("--calib", help="camera calibration TOML; camera id n = n-th camera")
-    one.add_argument("--db", help="pose store directory")
-    one.add_argument("--session", default="default", help="session name (default: default)")
-    one.add_argument("--method", default="samba", choices=sorted(METHODS))
-    one.add_argument("--fps", type=positive_float, default=60.0, help="camera frame rate")
+    one.add_argument(
+        "--calib",
+        metavar="FILE",
+        help="camera calibration TOML; camera id n = n-th camera (needed for markers; no default)",
+    )
+    one.add_argument(
+        "--db", metavar="STORE", help="pose store directory (needed for markers; no default)"
+    )
+    one.add_argument(
+        "--session", default="default", metavar="NAME", help="session name (default: default)"
+    )
+    one.add_argument(
+        "--method",
+        default="samba",
+        choices=sorted(METHODS),
+        help="reconstruction method, as samba eval --methods names them (default samba)",
+    )
+    one.add_argument(
+        "--fps",
+        type=positive_float,
+        default=60.0,
+        metavar="N",
+        help="camera frame rate (default 60)",
+    )
     one.add_argument(
         "--vmc",
         type=address,
         action="append",
         default=[],
         metavar="HOST:PORT",
-        help="send VMC to this receiver (repeatable), e.g. 127.0.0.1:39539",
+        help="send VMC to this receiver (repeatable), e.g. 127.0.0.1:39539 (default: none)",
     )
     one.add_argument(
         "--avatar",
+        metavar="FILE",
         help="avatar file (.vrm, .glb, .gltf, .usd, .usda, .usdc, .usdz) whose rig the VMC "
-        "stream uses",
+        "stream uses (default: the built-in mannequin)",
     )
-    one.add_argument("--wait-ms", type=float, default=50.0, help="wait for late cameras (ms)")
+    one.add_argument(
+        "--wait-ms",
+        type=float,
+        default=50.0,
+        metavar="MS",
+        help="wait for late cameras, milliseconds (default 50)",
+    )
     one.add_argument(
         "--labels",
         choices=LABELLERS,
@@ -76,7 +107,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         default=0.0,
         metavar="SECONDS",
         help="calibrate the subject's skin-marker offsets from the session's first SECONDS "
-        "(the subject moves naturally meanwhile) and remove them after; stored with takes",
+        "(the subject moves naturally meanwhile) and remove them after; stored with takes "
+        "(default 0: none)",
     )
     net = parser.add_argument_group("network")
     net.add_argument(
@@ -103,7 +135,8 @@ def register(parser: argparse.ArgumentParser) -> None:
     net.add_argument(
         "--token-file",
         metavar="FILE",
-        help="write the API token to FILE, readable by you only, instead of printing it",
+        help="write the API token to FILE, readable by you only, instead of printing it; "
+        "rewritten at every start (default: printed)",
     )
     net.add_argument(
         "--allow-host",
@@ -111,13 +144,14 @@ def register(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="NAME",
         help="a DNS name browsers reach the viewer and API by (repeatable); its address, "
-        "and localhost on loopback, always work",
+        "and localhost on loopback, always work (default: none)",
     )
     net.add_argument(
         "--keys",
         metavar="FILE",
         help="the nodes' keys (TOML, [[node]] tables: key_file, cameras, session); packets "
-        "must then be signed, each by the key of its camera; needed beyond loopback",
+        "must then be signed, each by the key of its camera; needed beyond loopback "
+        "(default: unsigned packets, loopback only)",
     )
     net.add_argument(
         "--max-skew",
@@ -134,7 +168,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="DIR",
         help="a folder whose calibrations, stores and avatars API sessions may name "
-        "(repeatable); besides it only the files given here at start",
+        "(repeatable); besides it only the files given here at start (default: none)",
     )
     api.add_argument(
         "--api-vmc",
@@ -143,7 +177,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         default=[],
         metavar="HOST:PORT",
         help="a VMC receiver API sessions may send to (repeatable); besides it only those "
-        "given here at start",
+        "given here at start (default: none)",
     )
     api.add_argument(
         "--max-sessions",
@@ -160,13 +194,19 @@ def register(parser: argparse.ArgumentParser) -> None:
         "server's event loop; auto (default) = 0 when no session has the server find "
         f"lost labels, else one per core ({CORES} here)",
     )
-    parser.add_argument("--takes", default="takes", help="folder of recorded takes")
+    parser.add_argument(
+        "--out-dir",
+        default="takes",
+        metavar="DIR",
+        help="folder recorded takes go into, as DIR/SESSION/TAKE.mcap (default ./takes)",
+    )
     parser.add_argument(
         "--record",
         nargs="?",
         const="",
         metavar="NAME",
-        help="record a take in every session from the start (optional take name)",
+        help="record a take in every session from the start, named NAME if given (default: "
+        "record only when asked over the API)",
     )
     parser.add_argument(
         "--duration", type=positive_float, help="stop after this many seconds (default: Ctrl-C)"
@@ -185,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
     )
     server = LiveServer(
         configs,
-        args.takes,
+        args.out_dir,
         udp=args.udp,
         http=None if args.no_http else args.http,
         token=args.token or os.environ.get("SAMBA_TOKEN") or None,
