@@ -11,6 +11,7 @@ from samba.volume.articulated_figure import creature_motion, long_chain, quadrup
 from samba.volume.capture import capture_volumes
 from samba.volume.evaluation import HumanReport, creature_take, exaggerated, human_take
 from samba.volume.frame_kinematics import Branch, FrameModel, frame_model
+from samba.volume.humanoid import walked_direction
 from samba.volume.isomap import VoxelGraph, isomap
 from samba.volume.sequence_model import fit_sequence
 from samba.volume.spherical_shells import skeleton_curve, sweep_and_prune
@@ -398,6 +399,14 @@ def test_exaggerated_poses_keep_bone_lengths() -> None:
     assert np.allclose(spread[:, [0, 1, 2, 7, 8]], poses[:, [0, 1, 2, 7, 8]])
     feet = np.linalg.norm(spread[:, 11] - spread[:, 12], axis=-1)
     assert (feet > np.linalg.norm(poses[:, 11] - poses[:, 12], axis=-1)).all()
+
+
+def test_the_walked_direction_is_the_horizontal_way_from_first_to_last_root() -> None:
+    t = np.linspace(0.0, 1.0, 50)[:, None]
+    walk = np.hstack([0.6 * t, 0.95 + 0.05 * np.sin(20 * t), -1.4 + 0.8 * t])  # (50, 3) m
+    np.testing.assert_allclose(walked_direction(walk), [0.6, 0.0, 0.8], atol=1e-9)
+    in_place = np.hstack([0.1 * t, 0.95 + 0.3 * t, 0.1 * t])  # crouching, 14 cm across
+    assert walked_direction(in_place) is None
 
 
 def test_empty_and_malformed_volumes_are_named() -> None:

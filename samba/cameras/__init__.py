@@ -13,7 +13,14 @@ from samba.cameras.calibration_file import (
 )
 from samba.cameras.camera import Camera, CameraGroup
 from samba.cameras.frame_io import read_frames, write_video
-from samba.cameras.frame_source import FrameSource, open_frames, open_video, sized_frames
+from samba.cameras.frame_source import (
+    FrameSource,
+    camera_frames,
+    cut_note,
+    open_frames,
+    open_video,
+    sized_frames,
+)
 from samba.cameras.recordings import (
     RecordingCalibration,
     calibrate_lens_recording,
@@ -33,8 +40,10 @@ __all__ = [
     "Triangulation",
     "calibrate_lens_recording",
     "calibrate_recordings",
+    "camera_frames",
     "camera_table",
     "convert_calibration",
+    "cut_note",
     "open_frames",
     "open_video",
     "parse_board",

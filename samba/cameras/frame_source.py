@@ -6,6 +6,13 @@ n-th image (from 0). A video's frames are numbered as decoded. Several cameras'
 sources are synchronised by frame number. Every problem a user can cause (a missing
 path, an empty folder, an unreadable image or video, images of different sizes) is an
 `InputError` naming the file.
+
+A video's frames may be the calibrated image cut by a few pixels at the right or the
+bottom: encoders crop to a multiple of 8 or 16 (the shared lab's 1088 x 1920 sensor
+window encoded 1080 wide). The pixels left keep their coordinates, so such frames are
+taken (`image_cut`: at most `MAX_CUT_PX` pixels or `MAX_CUT_FRACTION` of the side) and
+`sized_frames` brings them back to the camera's size, the cut columns and rows
+repeating the last ones; `cut_note` is the line that tells the user.
 """
 
 from __future__ import annotations
@@ -24,6 +31,11 @@ from samba.cameras.camera import Camera
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 """File extensions (any case) read as images from a folder."""
+MAX_CUT_PX = 16
+"""Most pixels by which a frame may fall short of the calibrated image, at the right or
+the bottom, and still be taken for it (an encoder's crop to a multiple of 16)..."""
+MAX_CUT_FRACTION = 0.01
+"""... or, for large images, most fraction of the side."""
 
 
 @dataclass(frozen=True)
@@ -60,6 +72,15 @@ class FrameSource:
                     f"{self.path} is {size[1]}x{size[0]}",
                 )
             yield number, image
+
+    def size(self) -> tuple[int, int]:
+        """(width, height) of the frames, pixels: the first frame's (decoded for it)."""
+        frames = self.frames()
+        try:
+            _, image = next(frames)
+        finally:
+            frames.close()
+        return image.shape[1], image.shape[0]
 
     def _decoded(self, every: int) -> Iterator[tuple[int, np.ndarray, Path]]:
         """(frame number, image, file it came from) of every `every`-th frame."""
@@ -116,20 +137,71 @@ def open_frames(path: str | Path) -> FrameSource:
     return FrameSource(path, ())
 
 
+def image_cut(
+    size: tuple[int, int], source: str, camera: Camera, calibration: str
+) -> tuple[int, int]:
+    """(columns, rows) by which frames of `size` (width, height) pixels of `source` fall
+    short of the image of `camera` (of the file `calibration`), cut at the right and the
+    bottom: (0, 0) for frames of its size. InputError naming `source` and
+    `calibration` when a frame is larger, or cut by more than `MAX_CUT_PX` pixels and
+    `MAX_CUT_FRACTION` of the side."""
+    cut = (camera.size[0] - size[0], camera.size[1] - size[1])
+    small = all(
+        0 <= short <= max(MAX_CUT_PX, MAX_CUT_FRACTION * side)
+        for short, side in zip(cut, camera.size, strict=True)
+    )
+    if not small:
+        raise InputError(
+            source,
+            f"frames are {size[0]}x{size[1]} but camera {camera.name!r} of {calibration} takes "
+            f"{camera.size[0]}x{camera.size[1]} images (a cut at the right or bottom of at "
+            f"most {MAX_CUT_PX} px or {MAX_CUT_FRACTION:.0%} is taken)",
+        )
+    return cut
+
+
+def cut_note(size: tuple[int, int], source: str, camera: Camera, calibration: str) -> str:
+    """The line telling that frames of `size` (width, height) pixels of `source` are the
+    image of `camera` (of the file `calibration`) cut at the right or bottom, and taken
+    so; "" for frames of its size. InputError as `image_cut` for any other size."""
+    columns, rows = image_cut(size, source, camera, calibration)
+    cuts = [
+        f"{count} {what} at the {side}"
+        for count, what, side in ((columns, "columns", "right"), (rows, "rows", "bottom"))
+        if count
+    ]
+    if not cuts:
+        return ""
+    return (
+        f"{source}: frames are {size[0]}x{size[1]}, camera {camera.name!r} of {calibration} "
+        f"takes {camera.size[0]}x{camera.size[1]}: taken as its image cut by "
+        f"{' and '.join(cuts)} (pixels keep their coordinates; the cut repeats the last ones)"
+    )
+
+
 def sized_frames(
     frames: Iterator[tuple[int, np.ndarray]], source: str, camera: Camera, calibration: str
 ) -> Iterator[tuple[int, np.ndarray]]:
-    """`frames` of `source`, checked to be of the image size of `camera` (of the file
-    `calibration`); InputError naming both otherwise."""
-    width, height = camera.size
+    """`frames` of `source` at the image size of `camera` (of the file `calibration`):
+    a frame cut at the right or bottom by a little (`image_cut`) is padded back to it,
+    repeating its last columns and rows; InputError naming both for any other size."""
     for number, frame in frames:
-        if frame.shape[:2] != (height, width):
-            raise InputError(
-                source,
-                f"frames are {frame.shape[1]}x{frame.shape[0]} but camera {camera.name!r} "
-                f"of {calibration} takes {width}x{height} images",
-            )
+        columns, rows = image_cut((frame.shape[1], frame.shape[0]), source, camera, calibration)
+        if columns or rows:
+            frame = cv2.copyMakeBorder(frame, 0, rows, 0, columns, cv2.BORDER_REPLICATE)
         yield number, frame
+
+
+def camera_frames(
+    source: str, camera: Camera, calibration: str
+) -> tuple[Iterator[tuple[int, np.ndarray]], str]:
+    """The frames (number, (H, W, 3) uint8 BGR) of the video or image folder `source` of
+    `camera` (of the file `calibration`) at its image size (`sized_frames`), and the
+    `cut_note` line telling they are its image cut ("" for frames of its size).
+    InputError naming `source` when it cannot be read or its frames are of another size."""
+    frames = open_frames(source)
+    note = cut_note(frames.size(), source, camera, calibration)
+    return sized_frames(frames.frames(), source, camera, calibration), note
 
 
 def _natural_key(path: Path) -> list[object]:

@@ -41,18 +41,20 @@ def carve_streams(
     extractors: Sequence[SilhouetteExtractor],
     hull: VisualHull,
     min_views: int | None,
+    tolerance: int = 0,
 ) -> tuple[int, list[np.ndarray], list[int]]:
     """The volumes (nx, ny, nz) bool of the frames read in lockstep from `streams` until
     the shortest ends, from the first to the last with at least `MIN_VOXELS` voxels
     (somebody in the volume), the frame number of the first of them, and each
-    volume's voxel count. A voxel is kept when `min_views` cameras (None: all) see it."""
+    volume's voxel count. A voxel is kept when `min_views` cameras (None: all) see it
+    in the silhouette or within `tolerance` pixels of it (`VisualHull.carve`)."""
     first, volumes, counts = 0, [], []
     for frames in zip(*streams, strict=False):
         silhouettes = [
             extractor.silhouette(frame)
             for extractor, (_, frame) in zip(extractors, frames, strict=True)
         ]
-        volume = hull.carve(silhouettes, min_views)
+        volume = hull.carve(silhouettes, min_views, tolerance)
         count = int(volume.sum())
         if not volumes:
             if count < MIN_VOXELS:

@@ -5,7 +5,8 @@ Of the common model's five leaf branches, the two whose ends are lowest on avera
 the legs, the shortest of the other three (by the mean arc length of the branch, which
 the number of joints on it does not change) is the head and the remaining two are the
 arms; left and right come from the subject's facing direction in the first frame
-(given by the user: the volume alone cannot tell front from back). Each limb is the
+(the volume alone cannot tell front from back: given by the user, or the direction the
+subject walks, `walked_direction`, people walking forwards). Each limb is the
 polyline from its branch's start (the root or a branching node: the top of the trunk
 for arms and head, the crotch for legs) through the model's joints to its end (the
 tip of the hand, foot or head). A capture joint sits at a fixed fraction of that
@@ -69,6 +70,9 @@ LEG_STATURE = 0.58
 MERGED_LEG = 0.85
 """A leg carved shorter than this fraction of its length is taken to be merged with the
 other (the feet together): it reaches up to its full length (`_full_leg`)."""
+MIN_WALK = 0.3
+"""Shortest horizontal distance (m) between the root's first and last position for
+`walked_direction` to take it as the direction the subject faces."""
 SNAP = 0.12
 """Largest distance (fraction of the limb) from an elbow's or knee's nominal place to
 a model joint that replaces it."""
@@ -131,6 +135,14 @@ def humanoid_joints(fit: SequenceFit, facing: np.ndarray) -> np.ndarray:
             else:
                 joints[:, _SHOULDERS[int(sign)]] = _shoulder(carved, limbs[other])
     return joints
+
+
+def walked_direction(root: np.ndarray) -> np.ndarray | None:
+    """The horizontal unit direction (3,) from the first to the last of the root
+    positions (n, 3) m, when they lie at least `MIN_WALK` m apart; None otherwise."""
+    step = (root[-1] - root[0]) * np.array([1.0, 0.0, 1.0])
+    distance = float(np.linalg.norm(step))
+    return step / distance if distance >= MIN_WALK else None
 
 
 def _full_leg(fit: SequenceFit, branch: int, leg: np.ndarray, stature: float) -> np.ndarray:

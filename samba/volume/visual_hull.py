@@ -4,7 +4,9 @@ Cameras stand around three sides of a rectangular capture volume divided into a
 `VoxelGrid`, each seeing roughly all of it (`volume_cameras`). `VisualHull`
 precomputes per camera a look-up table from each voxel to the pixel its centre
 projects to; carving a frame counts, for every voxel, the cameras whose silhouette
-holds that pixel, and keeps the voxels counted by enough cameras. `human_volumes`
+holds that pixel (or, with a `tolerance`, lies within that many pixels of it: a
+calibration a few pixels off carves thin parts away), and keeps the voxels counted by
+enough cameras. `human_volumes`
 renders and carves the synthetic human volume sequence of poses of the capsule body.
 """
 
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import cv2
 import numpy as np
 
 from samba.base import InputError
@@ -68,15 +71,23 @@ class VisualHull:
         tables[:, self._voxels] = self._tables
         return tables
 
-    def carve(self, silhouettes: Sequence[np.ndarray], min_views: int | None = None) -> np.ndarray:
+    def carve(
+        self, silhouettes: Sequence[np.ndarray], min_views: int | None = None, tolerance: int = 0
+    ) -> np.ndarray:
         """The occupancy (nx, ny, nz) bool of one frame's `silhouettes`.
 
         `silhouettes` holds one (H, W) bool mask per camera, in camera order, of that
         camera's image size. A voxel is kept when its centre's pixel is in the
-        silhouette in at least `min_views` cameras (default: all of them).
+        silhouette, or within `tolerance` pixels of it, in at least `min_views` cameras
+        (default: all of them).
         """
         self._check_count(silhouettes)
         masks = [self._checked_masks(i, mask, 2) for i, mask in enumerate(silhouettes)]
+        if not isinstance(tolerance, int | np.integer) or tolerance < 0:
+            raise InputError("tolerance", f"must be an integer >= 0 pixels, got {tolerance!r}")
+        if tolerance:
+            disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * tolerance + 1,) * 2)
+            masks = [cv2.dilate(mask.view(np.uint8), disc).view(bool) for mask in masks]
         return self._carve([mask.reshape(-1) for mask in masks], self._required(min_views))
 
     def carve_many(

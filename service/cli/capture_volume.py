@@ -2,7 +2,11 @@
 calibrated cameras (Chu, Jenkins, Matarić): visual hull, derived skeleton, BVH.
 
 One video or image folder per camera, in the order of the cameras in the calibration,
-is read in lockstep (the take ends with the shortest). Each camera's empty stage comes
+is read in lockstep (the take ends with the shortest); frames cut by a few pixels at the
+right or bottom of the calibrated image (an encoder's crop) are taken, with a line
+saying so (`samba.cameras.camera_frames`). The capture volume is `--bounds`, by default the
+box over the floor that the cameras carving a voxel all see, 2.2 m high
+(`samba.volume.floor_coverage`). Each camera's empty stage comes
 from `--background` (one video or folder per camera) or from the first
 `--empty-frames` frames of its video; footage without an empty stage takes `--segment`
 (a learnt person segmenter, `samba.silhouette.person_segmentation`). Every frame's silhouettes
@@ -10,7 +14,8 @@ from `--background` (one video or folder per camera) or from the first
 the take runs from the first to the last frame with somebody in the volume. The
 volumes give a kinematic model common to the take and its joint angles
 (`samba.volume.capture`), written as BVH; with `--joints`, a human model's 13 capture
-joints (`samba.volume.humanoid`) go to a NumPy archive too.
+joints (`samba.volume.humanoid`) go to a NumPy archive too, left and right taken from
+`--facing` or, by default, from the direction the subject walks.
 """
 
 from __future__ import annotations
@@ -24,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from samba.base import InputError, finite_float, natural, positive, positive_float
-from samba.cameras import CameraGroup, open_frames, read_calibration, sized_frames
+from samba.cameras import Camera, CameraGroup, camera_frames, read_calibration
 from samba.export import UNITS
 from samba.service.video_capture import write_volume_capture
 from samba.silhouette import BACKGROUND_METHODS, PersonSegmenter, SilhouetteExtractor
@@ -35,14 +40,16 @@ from samba.volume import (
     VisualHull,
     VolumeCapture,
     VoxelGrid,
+    capture_region,
     capture_volumes,
     carve_streams,
     humanoid_joints,
     learn_extractors,
+    walked_direction,
 )
 
-DEFAULT_BOUNDS = (-1.0, 0.0, -1.0, 1.0, 2.1, 1.0)
-"""Capture volume (x0, y0, z0, x1, y1, z1) m: 2 x 2 m of floor, 2.1 m high."""
+FACING = (0.0, 1.0)
+"""The subject's forward direction (x, z) when neither `--facing` nor the path gives it."""
 
 
 def register(parser: argparse.ArgumentParser) -> None:
@@ -81,9 +88,9 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--bounds",
         nargs=6,
         type=finite_float,
-        default=DEFAULT_BOUNDS,
         metavar=("X0", "Y0", "Z0", "X1", "Y1", "Z1"),
-        help="capture volume corners, meters (default: %(default)s)",
+        help="capture volume corners, meters (default: the floor all cameras carving a voxel "
+        "see, up to 2.2 m)",
     )
     parser.add_argument(
         "--voxel",
@@ -99,6 +106,14 @@ def register(parser: argparse.ArgumentParser) -> None:
         help="cameras whose silhouette must hold a voxel to keep it (default: all)",
     )
     parser.add_argument(
+        "--tolerance",
+        type=natural,
+        default=0,
+        metavar="PX",
+        help="keep voxels within PX pixels of a silhouette: a calibration a few pixels off "
+        "carves thin parts (the feet) away (default: 0)",
+    )
+    parser.add_argument(
         "--fps", type=positive_float, default=30.0, help="frame rate of the videos (default: 30)"
     )
     parser.add_argument(
@@ -112,9 +127,9 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--facing",
         nargs=2,
         type=finite_float,
-        default=(0.0, 1.0),
         metavar=("X", "Z"),
-        help="the subject's forward direction in the first frame (default: +Z)",
+        help="the subject's forward direction in the first frame (default: the direction "
+        "walked, else +Z)",
     )
     parser.set_defaults(run=run)
 
@@ -134,13 +149,17 @@ def run(args: argparse.Namespace) -> int:
             "--min-views",
             f"{args.min_views} is more than the {len(cameras)} cameras of {args.calib}",
         )
-    bounds = np.reshape(args.bounds, (2, 3))
+    if args.bounds is None:
+        bounds = capture_region(cameras, args.min_views)
+        print(_region_line(bounds, args.min_views or len(cameras), len(cameras)))
+    else:
+        bounds = np.reshape(args.bounds, (2, 3))
     try:
         grid = VoxelGrid.from_bounds(bounds[0], bounds[1], args.voxel)
     except InputError as exc:
         raise InputError("--bounds", exc.problem) from None
     streams = [
-        sized_frames(open_frames(video).frames(), video, camera, args.calib)
+        _camera_frames(video, camera, args.calib)
         for video, camera in zip(args.videos, cameras, strict=True)
     ]
     hull = VisualHull(grid, cameras)
@@ -152,7 +171,9 @@ def run(args: argparse.Namespace) -> int:
             ]
         else:
             extractors = _extractors(args, streams, cameras)
-        first, volumes, counts = carve_streams(streams, extractors, hull, args.min_views)
+        first, volumes, counts = carve_streams(
+            streams, extractors, hull, args.min_views, args.tolerance
+        )
     if not volumes:
         raise InputError(
             ", ".join(args.videos),
@@ -160,10 +181,10 @@ def run(args: argparse.Namespace) -> int:
         )
     capture = capture_volumes(np.stack(volumes), grid, args.fps)
     motion = capture.motion if args.lowpass is None else capture.motion.lowpassed(args.lowpass)
-    joints = None
+    joints, facing = None, ""
     if joints_out is not None and capture.fit.model.branch_count == HUMAN_END_BRANCHES:
-        facing = np.array([args.facing[0], 0.0, args.facing[1]])
-        joints = humanoid_joints(capture.fit, facing)
+        forward, facing = _facing(args.facing, capture.fit.root)
+        joints = humanoid_joints(capture.fit, forward)
     write_volume_capture(out, motion, args.unit, joints_out, joints)
     note = ""
     if joints_out is not None and joints is None:
@@ -172,9 +193,40 @@ def run(args: argparse.Namespace) -> int:
             f"{HUMAN_END_BRANCHES}): {joints_out} not written"
         )
     elif joints_out is not None:
-        note = f", 13 joints -> {joints_out}"
+        note = f", 13 joints -> {joints_out} ({facing})"
     print(_summary(capture, counts, first, out) + note)
     return 0
+
+
+def _camera_frames(source: str, camera: Camera, calibration: str) -> Frames:
+    """The frames of the video or folder `source` of `camera` (of the file
+    `calibration`) at its image size; a line says so when they are its image cut."""
+    frames, note = camera_frames(source, camera, calibration)
+    if note:
+        print(note)
+    return frames
+
+
+def _region_line(bounds: np.ndarray, views: int, cameras: int) -> str:
+    """The line telling the capture volume `bounds` (2, 3) m derived from the
+    calibration: the floor `views` of the `cameras` see."""
+    (x0, y0, z0), (x1, y1, z1) = bounds
+    seen = "all" if views == cameras else f"{views} of the"
+    return (
+        f"capture volume x {x0:.2f}..{x1:.2f}, y {y0:.2f}..{y1:.2f}, z {z0:.2f}..{z1:.2f} m: "
+        f"the floor {seen} {cameras} cameras see (--bounds to set it)"
+    )
+
+
+def _facing(given: Sequence[float] | None, root: np.ndarray) -> tuple[np.ndarray, str]:
+    """The subject's forward direction (3,) and where it came from, in words: `given`
+    (x, z) by --facing, else the direction the root (n, 3) m walked, else `FACING`."""
+    if given is not None:
+        return np.array([given[0], 0.0, given[1]]), "facing from --facing"
+    walked = walked_direction(root)
+    if walked is not None:
+        return walked, f"facing ({walked[0]:.2f}, {walked[2]:.2f}): the direction walked"
+    return np.array([FACING[0], 0.0, FACING[1]]), "facing +Z: --facing to set it"
 
 
 def _summary(capture: VolumeCapture, counts: list[int], first: int, out: Path) -> str:
@@ -224,7 +276,7 @@ def _extractors(
     if args.background:
         _check_per_camera(args.background, "--background videos", cameras, args.calib)
         stages = [
-            (source, sized_frames(open_frames(source).frames(), source, camera, args.calib))
+            (source, _camera_frames(source, camera, args.calib))
             for source, camera in zip(args.background, cameras, strict=True)
         ]
     else:

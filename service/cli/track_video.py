@@ -7,7 +7,9 @@ the subject) or from the first `--empty-frames` frames of VIDEO; footage without
 silhouette (`samba.silhouette.extraction`) is tracked with `samba.silhouette.tracker`;
 the 13-joint poses go to an MCAP take like the live service's, which `samba export`
 and `samba db import` read. The shape tree is read from the store
-(`samba db tree`), and built and saved there first when it is missing.
+(`samba db tree`), and built and saved there first when it is missing. Frames cut by a
+few pixels at the right or bottom of the calibrated image (an encoder's crop) are
+taken, with a line saying so (`samba.cameras.camera_frames`).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from samba.base import InputError, natural, positive_float
-from samba.cameras import Camera, open_frames, sized_frames
+from samba.cameras import Camera, camera_frames, open_frames, sized_frames
 from samba.db import stored_tree
 from samba.db.cli import add_camera_arguments, chosen_body, chosen_camera, chosen_home
 from samba.service.video_capture import track_video
@@ -70,7 +72,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(out), "already exists; takes are never overwritten")
     camera = chosen_camera(args.calib, args.camera)
     view = SilhouetteView(camera, chosen_home(args))
-    frames = sized_frames(open_frames(args.video).frames(), args.video, camera, args.calib)
+    frames, note = camera_frames(args.video, camera, args.calib)
+    if note:
+        print(note)
     with contextlib.ExitStack() as workers:
         if args.segment:
             segmenter = workers.enter_context(PersonSegmenter(args.video, camera.size))
