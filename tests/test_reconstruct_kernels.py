@@ -49,14 +49,20 @@ class FixedNeighbours:
         return np.zeros(rows.shape), rows
 
 
+@pytest.mark.parametrize("by_shoulders", [True, False])
 @pytest.mark.parametrize("name", ["chai", "samba", "best"])
-def test_degenerate_limbs_agree_with_numpy(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_degenerate_limbs_agree_with_numpy(
+    name: str, by_shoulders: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
     # Neighbours with a straight arm, an upper arm along the shoulder line and a thigh
-    # straight up take the pseudo-poses' fallback axes; one observation lacks two markers.
+    # straight up take the pseudo-poses' fallback axes; one observation lacks two markers
+    # (a shoulder among them: placed by its centroid even with `shoulder_origin`).
     poses = np.concatenate([degenerate_poses(), library(1, 1.0)[0].poses[:27]])
-    reconstructor = METHODS[name].build(FixedNeighbours(poses.astype(np.float64)))
+    chosen = METHODS[name]
+    chosen = replace(chosen, config=replace(chosen.config, shoulder_origin=by_shoulders))
+    reconstructor = chosen.build(FixedNeighbours(poses.astype(np.float64)))
     markers = np.repeat(markers_of(poses[3])[None], 2, axis=0) + 0.01
-    markers[1, [2, 5]] = np.nan
+    markers[1, [1, 5]] = np.nan
     has_target = np.array([False, True])
     compiled = reconstructor._solve_batch(markers, has_target)
     monkeypatch.setenv("SAMBA_KERNELS", "numpy")

@@ -4,7 +4,8 @@ An observation of the 8 markers is moved into the database frame by
 
     p_canonical = scale * R_y(yaw) @ (p_world - origin)
 
-where `origin` is the centroid of the markers present, `yaw` turns the subject about +Y
+where `origin` is the centroid of the markers present (or, with `shoulder_origin`, the
+midpoint of the shoulder markers when both are present), `yaw` turns the subject about +Y
 so that its left-right line points along +X (the subject faces +Z), and `scale`
 optionally brings the tibia (knee-to-foot) length to `REFERENCE_TIBIA`. The left-right
 line comes from the first complete marker pair in `HEADING_PAIRS` (shoulders, then knees,
@@ -47,8 +48,14 @@ class Alignment:
     scale: np.ndarray
 
     @classmethod
-    def from_markers(cls, markers: np.ndarray, scale_by_tibia: bool = False) -> Alignment:
-        """The alignment of marker sets (n, 8, 3) in meters, NaN for missing markers."""
+    def from_markers(
+        cls, markers: np.ndarray, scale_by_tibia: bool = False, shoulder_origin: bool = False
+    ) -> Alignment:
+        """The alignment of marker sets (n, 8, 3) in meters, NaN for missing markers.
+
+        `shoulder_origin` puts the origin at the shoulder midpoint of the sets with both
+        shoulder markers (the others keep the centroid): a database pose placed by it
+        has its shoulders, and so its head, where the observation has them."""
         markers = _as_batch(markers)
         missing = np.isnan(markers)
         if missing.any():
@@ -57,6 +64,10 @@ class Alignment:
             origin = np.add.reduce(markers, axis=1) * (1.0 / N_MARKERS)
             line = markers[:, 0] - markers[:, 1]
             yaw = np.arctan2(line[:, 2], line[:, 0])
+        if shoulder_origin:
+            midpoint = 0.5 * (markers[:, 0] + markers[:, 1])
+            both = ~np.isnan(midpoint).any(axis=1)
+            origin = np.where(both[:, None], midpoint, origin)
         scale = np.ones(len(markers))
         if scale_by_tibia:
             lengths = np.stack(

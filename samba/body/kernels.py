@@ -6,6 +6,7 @@ lazily with themselves (`pyproject.toml` lets those imports past the face).
 | kernel | numpy reference |
 |---|---|
 | `alignment_of` | `Alignment.from_markers` of one marker set |
+| `shoulder_origin` | its `shoulder_origin` |
 | `apply_alignment` | `Alignment.apply` |
 | `invert_alignment` | `Alignment.invert` |
 
@@ -63,6 +64,16 @@ def alignment_of(
         if known > 0 and total / known > 1e-6:
             scale = REFERENCE_TIBIA / (total / known)
     turn[0], turn[1], turn[2], turn[3] = np.cos(yaw) * scale, np.sin(yaw) * scale, scale, 1 / scale
+
+
+@compiled
+def shoulder_origin(markers: np.ndarray, present: np.ndarray, origin: np.ndarray) -> None:
+    """`Alignment.from_markers` with `shoulder_origin`: after `alignment_of`, moves
+    `origin` (3,) to the midpoint of the shoulder markers of `markers` (8, 3) when both
+    are `present`."""
+    if present[0] and present[1]:
+        for c in range(3):
+            origin[c] = 0.5 * (markers[0, c] + markers[1, c])
 
 
 @compiled

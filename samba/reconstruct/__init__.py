@@ -4,6 +4,7 @@ presets (`nn`, `chai`, `samba`, `best`), and a subject's skin-marker offsets (ca
 its own take, removed before retrieval). The pose database comes in as a `NeighbourSource`.
 """
 
+from samba.reconstruct.marker_hold import MarkerHold
 from samba.reconstruct.methods import METHODS, Method, method
 from samba.reconstruct.neighbours import NeighbourSource
 from samba.reconstruct.reconstruction import (
@@ -21,6 +22,7 @@ from samba.reconstruct.skin_offsets import (
 
 __all__ = [
     "METHODS",
+    "MarkerHold",
     "Method",
     "NeighbourSource",
     "PoseEstimate",

@@ -25,7 +25,7 @@ import numpy as np
 
 from samba.base import KernelSet, compiled
 from samba.body import MARKER_JOINTS, N_JOINTS, N_MARKERS, standard_pose
-from samba.body.kernels import alignment_of, apply_alignment, invert_alignment
+from samba.body.kernels import alignment_of, apply_alignment, invert_alignment, shoulder_origin
 
 _CHAIN_ROOTS = np.array([-1, 1, 2, 7, 8])
 """Root joint of each of the five chains (-1: the shoulder midpoint, for the neck)."""
@@ -55,16 +55,18 @@ def local_solutions_kernel(
     `markers` (b, 8, 3) the observations, world meters, NaN = missing (every frame with a
     left/right pair); `neighbours` (b, K, 13, 3) their K nearest database poses, world
     meters; `has_target` (b,) bool; `coefficients` (K, 5, 2N, 21) of the `AngleNoise`;
-    `scale_by_tibia` as the pose index's; `settings` (9,): variance_kept, variance_floor
+    `scale_by_tibia` as the pose index's; `settings` (10,): variance_kept, variance_floor
     (m^2), TRUNCATED, ROUNDING_VARIANCE (m^2), alpha, beta, beta_missing (1/m^2),
-    bandwidth, min_bandwidth (m) of the configuration (`local_space`). Returns offset
+    bandwidth, min_bandwidth (m) of the configuration (`local_space`), and 1.0 to place
+    by the shoulder midpoint (`shoulder_origin`), 0.0 by the centroid. Returns offset
     (b, 39), gain (b, 39, 39) and anchor (b, 39), world frame.
     """
     b, k = neighbours.shape[0], neighbours.shape[1]
     n = coefficients.shape[2] // 2
     m = k * n
     variance_kept, variance_floor, truncated, rounding = settings[:4]
-    alpha, beta, beta_missing, bandwidth, min_bandwidth = settings[4:]
+    alpha, beta, beta_missing, bandwidth, min_bandwidth = settings[4:9]
+    by_shoulders = settings[9] > 0.5
     offset = np.empty((b, _DIMS))
     gain = np.empty((b, _DIMS, _DIMS))
     anchor = np.empty((b, _DIMS))
@@ -83,11 +85,16 @@ def local_solutions_kernel(
         for i in range(N_MARKERS):
             present[i] = not np.isnan(markers[f, i, 0] + markers[f, i, 1] + markers[f, i, 2])
         alignment_of(markers[f], present, scale_by_tibia, origin, turn)
+        if by_shoulders:
+            shoulder_origin(markers[f], present, origin)
         apply_alignment(markers[f], origin, turn, aligned)
         observation_origin = origin.copy()
         observation_turn = turn.copy()
         for j in range(k):
-            alignment_of(neighbours[f, j][_MARKER_JOINTS], present, scale_by_tibia, origin, turn)
+            seen = neighbours[f, j][_MARKER_JOINTS]
+            alignment_of(seen, present, scale_by_tibia, origin, turn)
+            if by_shoulders:
+                shoulder_origin(seen, present, origin)
             apply_alignment(neighbours[f, j], origin, turn, pose)
             _pseudo_poses_of(pose, coefficients[j], samples[j * n : (j + 1) * n])
         _sample_weights(samples, aligned, present, bandwidth, min_bandwidth, weights)

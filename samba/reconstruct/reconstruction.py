@@ -13,12 +13,14 @@ frame of each in one batch) and `Reconstructor.reconstruct` for whole takes offl
 (all frames batched; only a 39 x 39 matrix-vector product per frame runs in sequence).
 All give the same poses.
 
-Missing markers are NaN. Retrieval and the marker term use the markers present; the
-smoothness term predicts the rest. A frame with fewer than `min_markers` markers or
-without a complete left/right marker pair to set the heading is not reconstructed: the
-pose is predicted from the previous estimates (velocity halved every frame, so it comes
-to rest), or, before any estimate, the standard pose is placed at the markers seen;
-it is flagged as predicted and not confident. No input produces a NaN pose.
+Missing markers are NaN. With `hold_frames` a missing marker is first held where it was
+last seen (`samba.reconstruct.marker_hold`, the paper's tracker). Retrieval and the
+marker term use the markers present; the smoothness term predicts the rest. A frame with
+fewer than `min_markers` markers or without a complete left/right marker pair to set the
+heading is not reconstructed: the pose is predicted from the previous estimates
+(velocity halved every frame, so it comes to rest), or, before any estimate, the
+standard pose is placed at the markers seen; it is flagged as predicted and not
+confident. No input produces a NaN pose.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from samba.reconstruct.local_space import (
     initial_weights,
     solve_lm,
 )
+from samba.reconstruct.marker_hold import MarkerHold
 from samba.reconstruct.neighbours import NeighbourSource
 from samba.reconstruct.part_retrieval import refine_with_parts
 from samba.reconstruct.pseudo_poses import AngleNoise, pseudo_poses
@@ -69,12 +72,18 @@ class ReconstructionConfig:
     (`samba.reconstruct.part_retrieval`); 0 keeps the paper's single retrieval. `missing_sigma` > 0
     (meters) holds the joint of a missing marker to its motion prediction with weight
     1 / missing_sigma^2 on top of the smoothness term; 0 leaves it to the pose space.
+    `shoulder_origin` places the observation and its neighbours by their shoulder
+    midpoint (False: by their marker centroid; `samba.body.Alignment`). `hold_frames` > 0
+    holds a missing marker at its last observation for up to that many frames
+    (`samba.reconstruct.marker_hold`) in frames that the markers seen make usable;
+    markers held count for the solve but not for `markers_used`, the residual or the
+    confidence.
     """
 
     k: int = 10
     n: int = 10
-    noise_deg: float = 5.0
-    variance_kept: float = 0.999
+    noise_deg: float = 10.0
+    variance_kept: float = 0.9995
     variance_floor: float = 1e-6
     marker_sigma: float = 0.005
     smooth_sigma: float = 0.08
@@ -86,6 +95,8 @@ class ReconstructionConfig:
     missing_sigma: float = 0.0
     bandwidth: float = 0.0
     min_bandwidth: float = 0.005
+    shoulder_origin: bool = True
+    hold_frames: int = 10
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.n < 1:
@@ -94,6 +105,8 @@ class ReconstructionConfig:
             raise ValueError(f"variance_kept must be in (0, 1], got {self.variance_kept}")
         if self.marker_sigma <= 0 or self.smooth_sigma <= 0:
             raise ValueError("marker_sigma and smooth_sigma must be positive")
+        if self.hold_frames < 0:
+            raise ValueError(f"hold_frames must be >= 0, got {self.hold_frames}")
 
     @property
     def alpha(self) -> float:
@@ -164,7 +177,8 @@ class Reconstructor:
 
     `source` gives the K nearest poses (a `samba.db.index.PoseIndex`, or anything with its
     `query`, `poses` and `scale_by_tibia`). The reconstructor keeps the last two
-    estimates for the smoothness term; `reset` forgets them (a new take).
+    estimates for the smoothness term and the markers it holds (`held`); `reset` forgets
+    them (a new take).
     """
 
     def __init__(self, source: NeighbourSource, config: ReconstructionConfig | None = None):
@@ -174,6 +188,7 @@ class Reconstructor:
             self.config.k, self.config.n, self.config.noise_deg, self.config.seed
         )
         self._history: list[np.ndarray] = []
+        self._held = MarkerHold(self.config.hold_frames)
         if kernels_enabled():
             _kernels().KERNELS.warm_up()
         self.prepare(1)
@@ -202,8 +217,19 @@ class Reconstructor:
         return len(markers) - 1
 
     def reset(self) -> None:
-        """Forget the previous estimates."""
+        """Forget the previous estimates and the markers held."""
         self._history = []
+        self._held.reset()
+
+    @property
+    def held(self) -> MarkerHold:
+        """A copy of the markers held for the next frames; set it to go back to an
+        earlier state (with `history`)."""
+        return self._held.copy()
+
+    @held.setter
+    def held(self, state: MarkerHold) -> None:
+        self._held = state.copy()
 
     @property
     def history(self) -> list[np.ndarray]:
@@ -244,13 +270,14 @@ class Reconstructor:
         each aligned by its own markers masked like the observation's; canonical frame."""
         cfg = self.config
         scale = self.source.scale_by_tibia
-        alignment = Alignment.from_markers(markers, scale_by_tibia=scale)
+        by_shoulders = cfg.shoulder_origin
+        alignment = Alignment.from_markers(markers, scale, by_shoulders)
         aligned = alignment.apply(markers)
         _, rows = self.source.query(markers, k=cfg.k, eps=cfg.eps)
         poses = np.asarray(self.source.poses[rows.reshape(-1)], dtype=np.float64)
         seen = markers_of(poses.reshape(len(markers), cfg.k, N_JOINTS, 3))
         seen = np.where(np.isnan(markers)[:, None], np.nan, seen).reshape(-1, N_MARKERS, 3)
-        poses = Alignment.from_markers(seen, scale_by_tibia=scale).apply(poses)
+        poses = Alignment.from_markers(seen, scale, by_shoulders).apply(poses)
         return alignment, aligned, poses.reshape(len(markers), cfg.k, N_JOINTS, 3)
 
     def local_spaces(
@@ -300,6 +327,7 @@ class Reconstructor:
                 cfg.beta_missing,
                 cfg.bandwidth,
                 cfg.min_bandwidth,
+                float(cfg.shoulder_origin),
             ]
         )
         neighbours = neighbours.reshape(len(markers), cfg.k, N_JOINTS, 3)
@@ -422,35 +450,43 @@ def _reconstruct(
     """Frames (F, 8, 3) in order, frame i continuing owners[i]'s estimates; every owner
     shares the class, configuration and source of `model`."""
     cfg = model.config
-    present = ~np.isnan(markers).any(axis=-1)
-    usable = model.usable(present)
+    observed = ~np.isnan(markers).any(axis=-1)
+    usable = model.usable(observed)
+    solved_markers = _held_markers(owners, markers) if cfg.hold_frames else markers
     frames = np.flatnonzero(usable)
     started: set[int] = set()
     has_target = np.empty(len(owners), dtype=bool)
     for i, owner in enumerate(owners):
         has_target[i] = bool(owner._history) or id(owner) in started
         started.add(id(owner))
-    solved = model._solve_batch(markers[frames], has_target[frames]) if len(frames) else None
+    solved = model._solve_batch(solved_markers[frames], has_target[frames]) if frames.size else None
     poses = np.empty((len(markers), POSE_DIMS))
     slot = np.full(len(markers), -1)
     slot[frames] = np.arange(len(frames))
     for i, owner in enumerate(owners):
         predicted = slot[i] < 0
-        q = owner._predict(markers[i], present[i]) if predicted else owner._apply(solved, slot[i])
+        q = owner._predict(markers[i], observed[i]) if predicted else owner._apply(solved, slot[i])
         poses[i] = q
         owner._history = [q, *owner._history[:1]]
     poses = poses.reshape(-1, N_JOINTS, 3)
     if cfg.part_k and len(frames):
         # Missing markers are filled with the main estimate, so every part is queried.
-        seen = markers[frames]
+        seen = solved_markers[frames]
         filled = np.where(np.isnan(seen), markers_of(poses[frames]), seen)
         poses[frames] = refine_with_parts(model.source, filled, poses[frames], cfg.part_k, cfg.eps)
-    diff = np.where(present[..., None], markers_of(poses) - markers, 0.0)
+    diff = np.where(observed[..., None], markers_of(poses) - markers, 0.0)
     squared = np.einsum("fmc,fmc->fm", diff, diff)
-    used = np.where(usable, present.sum(axis=1), 0)
+    used = np.where(usable, observed.sum(axis=1), 0)
     residual = np.sqrt(squared.sum(axis=1) / np.maximum(used, 1)) * usable
     confident = usable & (used >= 6) & (residual <= cfg.confident_residual)
     return Reconstruction(poses, residual, used, confident, ~usable)
+
+
+def _held_markers(owners: list[Reconstructor], markers: np.ndarray) -> np.ndarray:
+    """Markers (F, 8, 3) with each owner's held markers filled in, frame i by owners[i]."""
+    if all(owner is owners[0] for owner in owners):
+        return owners[0]._held.fill(markers)
+    return np.concatenate([o._held.fill(m[None]) for o, m in zip(owners, markers, strict=True)])
 
 
 def _kernels() -> ModuleType:

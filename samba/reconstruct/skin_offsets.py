@@ -16,11 +16,13 @@ of the calibration stretch: with the offsets so far, the corrected markers
 `marker - R @ offset` are reconstructed by `best`'s configuration (whatever method then
 reconstructs the take: the offsets belong to the subject) with the marker term loosened
 to `CALIBRATION_MARKER_SIGMA`, so that the pose keeps the database's body geometry
-rather than following the markers; then the offsets that best explain the markers from that
-pose are, in the least-squares sense, the mean over frames of `R_f^T (marker_f -
-joint_f)` (each R_f orthonormal), kept to the direction in which each marker sits
-off its joint (`FREE_AXES`) and at most `MAX_OFFSET` long. The two steps repeat
-`iterations` times from zero offsets, each over-relaxed by `RELAXATION`.
+rather than following the markers, and placed by the markers' centroid (placed by the
+shoulder markers, it would carry their own offsets to every joint); then the offsets
+that best explain the markers from that pose are, in the least-squares sense, the mean
+over frames of `R_f^T (marker_f - joint_f)` (each R_f orthonormal), kept to the
+direction in which each marker sits off its joint (`FREE_AXES`) and at most
+`MAX_OFFSET` long. The two steps repeat `iterations` times from zero offsets, each
+over-relaxed by `RELAXATION`.
 
 **Removal** (`SkinMarkerReconstructor`): live, each frame's markers are corrected with
 the segment frames of the pose the previous estimates predict (constant velocity);
@@ -134,14 +136,16 @@ def calibrate_skin_offsets(
 ) -> SkinOffsets:
     """A subject's skin offsets from the markers (c, 8, 3), world meters (NaN = missing),
     of a calibration stretch, against `reconstructor`'s database (module docstring),
-    reconstructing by `best`'s configuration with the marker term's sigma
-    `marker_sigma` meters. `reconstructor` itself is not changed. `ValueError` when no
-    frame of the stretch can be reconstructed."""
+    reconstructing by `best`'s configuration, placed by the markers' centroid, with the
+    marker term's sigma `marker_sigma` meters. `reconstructor` itself is not changed.
+    `ValueError` when no frame of the stretch can be reconstructed."""
     markers = np.asarray(markers, dtype=np.float64)
     present = ~np.isnan(markers).any(axis=-1)
     if not reconstructor.usable(present).any():
         raise ValueError("no frame of the calibration stretch has enough markers")
-    loose = Reconstructor(reconstructor.source, replace(BEST, marker_sigma=marker_sigma))
+    loose = Reconstructor(
+        reconstructor.source, replace(BEST, marker_sigma=marker_sigma, shoulder_origin=False)
+    )
     used = present & loose.usable(present)[:, None]
     counts = np.maximum(used.sum(axis=0), 1)[:, None]
     offsets = SkinOffsets.none()
@@ -204,7 +208,7 @@ class SkinMarkerReconstructor:
         passes: the raw markers give the segment frames that correct them for the
         second; continues from (and updates) the previous estimates."""
         markers = np.asarray(markers, dtype=np.float64)
-        history = self.inner.history
+        history, held = self.inner.history, self.inner.held
         first = self.inner.reconstruct(markers)
-        self.inner.history = history
+        self.inner.history, self.inner.held = history, held
         return self.inner.reconstruct(self.offsets.joints(markers, first.poses))
