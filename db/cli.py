@@ -23,7 +23,11 @@ from samba.cameras import Camera, read_calibration
 from samba.db.errors import QueryError
 from samba.db.shape_tree_file import tree_path, write_shape_tree
 from samba.db.store import PoseStore
+from samba.db.take_refs import id_text
 from samba.silhouette import ShapeTree, SilhouetteView
+
+TAKE_HELP = "take name, or id written '#3' (quoted: the shell reads # as a comment)"
+"""What a TAKE argument is (`samba.db.take_refs`): a bare number is a name."""
 
 
 def add_create_action(sub: Any) -> None:
@@ -38,7 +42,6 @@ def add_create_action(sub: Any) -> None:
     p.set_defaults(run=_init)
 
 
-
 def add_store_actions(sub: Any) -> None:
     """Add `ls`, `show`, `label`, `rm`, `verify`, `stats`, `tree` and `query` to the
     `samba db` actions `sub`."""
@@ -49,13 +52,13 @@ def add_store_actions(sub: Any) -> None:
 
     p = sub.add_parser("show", help="show one take")
     p.add_argument("store")
-    p.add_argument("take", help="take id or name")
+    p.add_argument("take", help=TAKE_HELP)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(run=_show)
 
     p = sub.add_parser("label", help="set a take's subject, action or tags")
     p.add_argument("store")
-    p.add_argument("take", help="take id or name")
+    p.add_argument("take", help=TAKE_HELP)
     p.add_argument("--subject")
     p.add_argument("--action")
     p.add_argument(
@@ -69,7 +72,7 @@ def add_store_actions(sub: Any) -> None:
 
     p = sub.add_parser("rm", help="delete takes (with their mirrors)")
     p.add_argument("store")
-    p.add_argument("takes", nargs="+", help="take ids or names")
+    p.add_argument("takes", nargs="+", help=TAKE_HELP)
     p.set_defaults(run=_rm)
 
     p = sub.add_parser("verify", help="check catalog, pose data and index")
@@ -94,7 +97,7 @@ def add_store_actions(sub: Any) -> None:
     src.add_argument(
         "--pose",
         metavar="TAKE:FRAME",
-        help="use the markers of a stored pose (take id or name : frame number)",
+        help="use the markers of a stored pose (take name, or id as '#3' : frame number)",
     )
     p.add_argument(
         "--drop",
@@ -196,11 +199,11 @@ def _ls(args: argparse.Namespace) -> int:
         print(json.dumps([t.to_dict() for t in store.takes], indent=1))
         return 0
     print(
-        f"{'id':>4} {'name':32} {'rig':9} {'frames':>6} {'fps':>5} {'subject':8} {'action':10} tags"
+        f"{'id':>5} {'name':32} {'rig':9} {'frames':>6} {'fps':>5} {'subject':8} {'action':10} tags"
     )
     for t in store.takes:
         print(
-            f"{t.id:4d} {t.name[:32]:32} {t.rig:9} {t.frame_count:6d} {t.fps:5.0f} "
+            f"{id_text(t.id):>5} {t.name[:32]:32} {t.rig:9} {t.frame_count:6d} {t.fps:5.0f} "
             f"{t.subject[:8]:8} {t.action[:10]:10} {','.join(t.tags)}"
         )
     print(f"{len(store.takes)} takes, {len(store)} poses")
@@ -228,7 +231,7 @@ def _label(args: argparse.Namespace) -> int:
     store = PoseStore.open(args.store)
     info = store.label(args.take, subject=args.subject, action=args.action, tags=args.tags)
     print(
-        f"take {info.id} {info.name}: subject={info.subject!r} action={info.action!r} "
+        f"take {id_text(info.id)} {info.name}: subject={info.subject!r} action={info.action!r} "
         f"tags={list(info.tags)}"
     )
     return 0
@@ -238,7 +241,7 @@ def _rm(args: argparse.Namespace) -> int:
     store = PoseStore.open(args.store)
     removed = store.remove(args.takes)
     print(
-        f"removed takes {', '.join(map(str, removed))}; "
+        f"removed takes {', '.join(map(id_text, removed))}; "
         f"{len(store.takes)} takes, {len(store)} poses remain"
     )
     return 0

@@ -24,6 +24,7 @@ import contextlib
 import fcntl
 import json
 import os
+import shlex
 import sqlite3
 import time
 import uuid
@@ -56,19 +57,13 @@ from samba.db.pose_files import (
     map_committed,
     write_compacted,
 )
-from samba.db.take_rows import (
-    PreparedTake,
-    check_addable,
-    insert_takes,
-    stored_copy,
-)
+from samba.db.take_checks import MAX_COORDINATE_M, check_addable, take_problems
+from samba.db.take_refs import command_ref, find_take
+from samba.db.take_rows import PreparedTake, insert_takes, stored_copy
 from samba.db.take_rows import drop_near_duplicates as drop_near_duplicates
 
 CATALOG = "catalog.sqlite"
 INDEX = "index.npz"
-MAX_COORDINATE_M = 10_000.0
-"""Largest joint coordinate (meters) sound pose data holds; beyond it (or NaN) the data
-file is damaged (`PoseStore.check_poses`)."""
 
 
 @dataclass(frozen=True)
@@ -212,39 +207,59 @@ class PoseStore:
     # -- reading -------------------------------------------------------------------------
 
     def take(self, ref: int | str) -> TakeInfo:
-        """A take by id or by name; raises `StoreError` if there is none (or several)."""
-        if isinstance(ref, int | np.integer) or (isinstance(ref, str) and ref.isdigit()):
-            hits = [t for t in self.takes if t.id == int(ref)]
-        else:
-            hits = [t for t in self.takes if t.name == ref]
-        if len(hits) != 1:
-            problem = "no take" if not hits else f"{len(hits)} takes (use the id)"
-            raise StoreError(str(self.path), f"{problem} matching {ref!r}")
-        return hits[0]
+        """A take by id (an int, or text such as `#3`) or by name (any other text, digits
+        too: `samba.db.take_refs`); raises `StoreError` if there is none (or several)."""
+        return find_take(self.takes, ref, str(self.path))
+
+    def removal_hint(self, take_ids: Sequence[int]) -> str:
+        """The command that removes the takes `take_ids` (each by name where the name
+        says which, a mirror through its original), e.g. `samba db rm STORE walk`."""
+        by_id = {t.id: t for t in self.takes}
+        refs: list[str] = []
+        for take_id in take_ids:
+            info = by_id[int(take_id)]
+            info = by_id.get(info.mirror_of, info) if info.mirror_of is not None else info
+            ref = command_ref(info, self.takes)
+            if ref not in refs:
+                refs.append(ref)
+        return f"samba db rm {shlex.quote(str(self.path))} {' '.join(refs)}"
 
     def take_poses(self, ref: int | str) -> np.ndarray:
         """The poses (frame_count, 13, 3) float32 of one take, meters; StoreError naming
         the data file when they are damaged (`check_poses`)."""
         info = self.take(ref)
         poses = np.asarray(self.poses[info.first_row : info.first_row + info.frame_count])
-        self._check_sound(poses, f"take {info.id} ({info.name!r})")
+        self._check_sound(
+            poses,
+            f"take {info.id} ({info.name!r})",
+            self.take_ids[info.first_row : info.first_row + info.frame_count],
+        )
         return poses
 
     def check_poses(self) -> None:
-        """StoreError naming the data file when the committed poses hold NaN, infinity or
-        a coordinate beyond `MAX_COORDINATE_M` (damage that `verify` details): searching,
-        indexing or importing into such a store would fail or mislead."""
-        self._check_sound(np.asarray(self.poses), "pose data")
+        """StoreError naming the data file, the takes whose poses hold NaN, infinity or a
+        coordinate beyond `MAX_COORDINATE_M` (damage that `verify` details) and the
+        command that removes them: searching, indexing or importing into such a store
+        would fail or mislead."""
+        self._check_sound(np.asarray(self.poses), "pose data", self.take_ids)
 
-    def _check_sound(self, poses: np.ndarray, what: str) -> None:
+    def _check_sound(self, poses: np.ndarray, what: str, take_ids: np.ndarray) -> None:
         with np.errstate(invalid="ignore"):
             sound = np.abs(poses) <= MAX_COORDINATE_M  # False for NaN
-        if not sound.all():
-            raise StoreError(
-                str(data_files(self.path, self.data_name)[0]),
-                f"{what} damaged: {np.count_nonzero(~sound)} values NaN, infinite or beyond "
-                f"{MAX_COORDINATE_M:g} m; run `samba db verify {self.path}`",
-            )
+        if sound.all():
+            return
+        bad_rows = ~sound.all(axis=(1, 2))
+        known = {t.id for t in self.takes}
+        causes = [int(i) for i in np.unique(take_ids[bad_rows]) if int(i) in known]
+        names = ", ".join(f"{t.id} ({t.name!r})" for t in self.takes if t.id in causes)
+        remedy = f"remove with `{self.removal_hint(causes)}`, then " if causes else ""
+        raise StoreError(
+            str(data_files(self.path, self.data_name)[0]),
+            f"{what} damaged: {np.count_nonzero(~sound)} values NaN, infinite or beyond "
+            f"{MAX_COORDINATE_M:g} m"
+            + (f" in take {names}" if names else "")
+            + f"; {remedy}run `samba db verify {shlex.quote(str(self.path))}`",
+        )
 
     @property
     def index(self) -> PoseIndex:
@@ -532,10 +547,14 @@ class PoseStore:
                 continue
             if checksum(data) != t.checksum:
                 report.problems.append(f"take {t.id} ({t.name}): pose data checksum mismatch")
-            if not np.isfinite(data).all():
-                report.problems.append(f"take {t.id} ({t.name}): NaN or infinite poses")
             if not (self.take_ids[t.first_row : expected] == t.id).all():
                 report.problems.append(f"take {t.id} ({t.name}): pose rows name another take")
+            refused = take_problems(data, t.fps)
+            if refused:
+                report.problems.append(
+                    f"take {t.id} ({t.name}): import refuses it: {'; '.join(refused)}; "
+                    f"`{self.removal_hint([t.id])}` removes it"
+                )
         if expected != len(self):
             report.problems.append(f"takes cover {expected} rows but {len(self)} are committed")
         if len(self) and not self.index_is_fresh():

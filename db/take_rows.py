@@ -10,7 +10,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from samba.body import Take, mirror_poses
-from samba.db.errors import StoreError
 from samba.db.pose_files import checksum
 
 
@@ -26,12 +25,6 @@ def drop_near_duplicates(poses: np.ndarray, min_change: float) -> np.ndarray:
             keep.append(i)
             last = poses[i]
     return np.array(keep)
-
-
-def check_addable(take: Take) -> None:
-    """`StoreError` naming the take's source when it cannot be added (it holds no poses)."""
-    if len(take) == 0:
-        raise StoreError(take.source or take.name, "the take holds no poses")
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,8 @@ from samba.body import (
     sample_rotations,
     whole_fps,
 )
+from samba.db import frame_count_problem, frame_rate_problem
+from samba.export.errors import ExportError
 from samba.export.humanoid import N_BONES, PARENTS, TIP_BONES, HumanoidRig
 
 
@@ -68,10 +70,18 @@ class HumanoidMotion:
         return HumanoidMotion(self.rig, self.rotations[start:stop], self.root[start:stop], self.fps)
 
     def resampled(self, fps: float) -> HumanoidMotion:
-        """The motion at another frame rate over the same time span: rotations
-        interpolated on the shorter arc, the root linearly."""
-        if not 0 < fps < float("inf"):
-            raise ValueError(f"--fps must be positive and finite, got {fps}")
+        """The motion at another frame rate `fps` (frames per second) over the same time
+        span: rotations interpolated on the shorter arc, the root linearly. `ExportError`
+        naming --fps, before anything is sampled, when the rate is outside
+        `samba.db.FPS_RANGE` or the motion would get more than `samba.db.MAX_TAKE_FRAMES`
+        frames."""
+        frames = int((len(self) - 1) * fps / self.fps) + 1 if fps > 0 else 0
+        problem = frame_rate_problem(fps) or frame_count_problem(frames)
+        if problem:
+            raise ExportError(
+                "--fps",
+                f"{fps:g} fps for a take of {len(self):,} frames at {self.fps:g} fps: {problem}",
+            )
         times = resample_times(len(self), self.fps, fps)
         rotations = sample_rotations(self.rotations, times)
         return HumanoidMotion(self.rig, rotations, sample_linear(self.root, times), fps)

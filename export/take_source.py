@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from samba.body import N_JOINTS, Take
-from samba.db import PoseStore
+from samba.db import PoseStore, frame_count_problem
 from samba.export.errors import ExportError
 from samba.ingest import BvhImportOptions, RigMap, load_bvh_take, read_take
 
@@ -41,6 +41,9 @@ def _store_take(store: PoseStore, ref: str) -> Take:
     poses = store.take_poses(info.id).astype(np.float64)  # StoreError when damaged
     rows = slice(info.first_row, info.first_row + info.frame_count)
     frames = np.asarray(store.frames[rows], dtype=np.int64)
+    problem = frame_count_problem(int(frames[-1] - frames[0]) + 1)
+    if problem:
+        raise ExportError(ref, f"its frames {frames[0]}-{frames[-1]} played whole: {problem}")
     full = np.arange(frames[0], frames[-1] + 1)
     if len(full) != len(frames):
         flat = poses.reshape(len(poses), -1)

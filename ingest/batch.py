@@ -13,6 +13,7 @@ from samba.base import SambaError
 from samba.body import Take
 from samba.db import AddResult, PoseStore, check_addable
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
+from samba.ingest.input_files import clipped
 from samba.ingest.mcap_take import read_take
 
 SUFFIXES = (".bvh", ".mcap")
@@ -72,7 +73,8 @@ def import_paths(
 
     Files are read one by one and their takes committed in groups (`PoseStore.add_many`):
     once `commit_files` are waiting or the first of them has waited `commit_seconds`.
-    A bad file fails alone; an interruption (or a crash) loses at most the files not
+    A bad file fails alone, whatever its error (one line: `FileResult.error`); an
+    interruption (or a crash) loses at most the files not
     yet committed, and the store always holds whole files. A file whose content is
     already stored, or comes in an earlier file, is a duplicate. The index is rebuilt
     once at the end. A store whose catalog or pose data is damaged
@@ -90,8 +92,8 @@ def import_paths(
         try:
             take = _load_take(path, options)
             check_addable(take)
-        except SambaError as exc:
-            results.append(FileResult(str(path), "failed", error=str(exc)))
+        except Exception as exc:  # a bad file fails alone, whatever its error
+            results.append(FileResult(str(path), "failed", error=_failure(path, exc)))
             continue
         group.hold(path, take)
         if len(group) >= commit_files or group.waited() >= commit_seconds:
@@ -164,12 +166,21 @@ def _file_result(path: str, take: Take, added: AddResult) -> FileResult:
     )
 
 
+def _failure(path: Path, exc: Exception) -> str:
+    """The one line telling why the file `path` failed with `exc`: a `SambaError`'s own
+    message, else the error's type and at most `QUOTE_CHARS` characters of its text."""
+    if isinstance(exc, SambaError):
+        return str(exc)
+    return f"{path}: cannot import: {type(exc).__name__}: {clipped(str(exc))}"
+
+
 def _load_take(path: Path, options: BvhImportOptions | None) -> Take:
     """A BVH file read with `options`, or a take the live service recorded (.mcap), which
-    keeps its own frame rate and gets only the subject / action labels of `options`."""
+    keeps its own frame rate and gets only the subject / action labels and the file size
+    limit of `options`."""
     if path.suffix.lower() != ".mcap":
         return load_bvh_take(path, options)
-    take = read_take(path)
+    take = read_take(path, (options or BvhImportOptions()).max_file_bytes)
     if options is not None:
         take.subject, take.action = options.subject, options.action
     return take

@@ -25,6 +25,7 @@ import numpy as np
 from samba.base import KernelSet, kernels_enabled
 from samba.body import euler_to_quaternions, forward_kinematics, whole_fps
 from samba.ingest.errors import BvhError
+from samba.ingest.input_files import MAX_FILE_BYTES, quoted, read_input
 from samba.ingest.resolver import SkeletonTree
 
 _CHANNELS = {f"{axis}{kind}": (kind, axis) for axis in "XYZ" for kind in ("position", "rotation")}
@@ -36,6 +37,21 @@ _HEAD_WINDOW = 4096
 """Bytes after the MOTION line in which `_parse_plain` looks for 'Frames:' and 'Frame
 Time:' (the full path reads files that put them further)."""
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+MAX_DEPTH = 256
+"""Deepest nesting of joints read (a full-body rig with fingers nests about 30 deep)."""
+MAX_JOINTS = 10_000
+"""Most joints (End Sites included) a hierarchy may declare."""
+MAX_NAME_CHARS = 200
+"""Longest joint name read."""
+_MAX_CHANNELS = 6
+"""Most channels of one joint: three positions and three rotations."""
+_MAX_FRAME_DIGITS = 18
+"""Most digits of 'Frames:' (a count beyond them is no count of frames a file holds)."""
+_LINE_BYTES_A_VALUE = 64
+"""Bytes a motion line may hold per value before `np.loadtxt` is not asked to read it (a
+line far longer than its values need is diagnosed without being read as numbers)."""
+_CACHED_HEADER_CHARS = 1_000_000
+"""Longest hierarchy text whose parse is kept for the next file of the rig."""
 _INEXACT_SHARE = 8
 """The reader's kernel leaves at most one number in this many to Python's `float` (more
 than 15 significant digits, or beyond 10^22 either way: a Daz export writes two such in
@@ -145,14 +161,10 @@ class BvhFile:
         return world[:, [subset.index(j) for j in joints]]
 
 
-def read_bvh(path: str | Path) -> BvhFile:
-    """Read and validate a BVH file; raises `BvhError` naming the file and line."""
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise BvhError(str(path), f"cannot read file: {exc.strerror or exc}") from exc
-    return parse_bvh(data, source=str(path))
+def read_bvh(path: str | Path, max_bytes: int = MAX_FILE_BYTES) -> BvhFile:
+    """Read and validate a BVH file (a regular file of at most `max_bytes` bytes,
+    `samba.ingest.input_files.read_input`); raises `BvhError` naming the file and line."""
+    return parse_bvh(read_input(path, max_bytes, BvhError), source=str(path))
 
 
 def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
@@ -224,8 +236,11 @@ def _parse_plain(data: bytes, source: str) -> BvhFile | None:
 
 
 def _hierarchy(header: str, source: str) -> tuple[BvhJoint, ...]:
-    """The joints declared by the text before MOTION; files of one rig share the parse."""
+    """The joints declared by the text before MOTION; files of one rig share the parse
+    (of a header up to `_CACHED_HEADER_CHARS` long)."""
     try:
+        if len(header) > _CACHED_HEADER_CHARS:
+            return _joints_of(header)
         return _parsed_hierarchy(header)
     except BvhError as exc:
         raise BvhError(source, exc.problem, exc.line) from None
@@ -233,6 +248,10 @@ def _hierarchy(header: str, source: str) -> tuple[BvhJoint, ...]:
 
 @functools.lru_cache(maxsize=16)
 def _parsed_hierarchy(header: str) -> tuple[BvhJoint, ...]:
+    return _joints_of(header)
+
+
+def _joints_of(header: str) -> tuple[BvhJoint, ...]:
     lines = [ln.rstrip("\r") for ln in header.split("\n")]
     return tuple(_parse_hierarchy(lines, source=""))
 
@@ -243,42 +262,47 @@ def _byte_line(data: bytes, offset: int) -> int:
 
 
 class _Tokens:
+    """The tokens of the hierarchy's lines with their line numbers, read one at a time
+    (the text is not split into a list of tokens)."""
+
     def __init__(self, lines: list[str], source: str) -> None:
-        self.items = [
-            (token, n + 1) for n, line in enumerate(lines) for token in _TOKEN.findall(line)
-        ]
-        self.pos = 0
+        self._stream = (
+            (match.group(), n + 1)
+            for n, line in enumerate(lines)
+            for match in _TOKEN.finditer(line)
+        )
+        self._next = next(self._stream, None)
         self.source = source
         self.last_line = max(len(lines), 1)
 
     def peek(self) -> str | None:
-        return self.items[self.pos][0] if self.pos < len(self.items) else None
+        return None if self._next is None else self._next[0]
 
     @property
     def line(self) -> int:
-        return self.items[self.pos][1] if self.pos < len(self.items) else self.last_line
+        return self.last_line if self._next is None else self._next[1]
 
     def take(self, what: str) -> str:
-        if self.pos >= len(self.items):
+        if self._next is None:
             raise BvhError(self.source, f"hierarchy ends early, expected {what}", self.line)
-        token = self.items[self.pos][0]
-        self.pos += 1
+        token = self._next[0]
+        self._next = next(self._stream, None)
         return token
 
     def expect(self, literal: str) -> None:
         line = self.line
         token = self.take(repr(literal))
         if token.upper() != literal.upper():
-            raise BvhError(self.source, f"expected {literal!r}, found {token!r}", line)
+            raise BvhError(self.source, f"expected {literal!r}, found {quoted(token)}", line)
 
     def number(self, what: str) -> float:
         line = self.line
         token = self.take(what)
         if not _NUMBER.match(token):
-            raise BvhError(self.source, f"{what}: {token!r} is not a number", line)
+            raise BvhError(self.source, f"{what}: {quoted(token)} is not a number", line)
         value = float(token)
         if not math.isfinite(value):
-            raise BvhError(self.source, f"{what}: {token!r} is out of range", line)
+            raise BvhError(self.source, f"{what}: {quoted(token)} is out of range", line)
         return value
 
 
@@ -292,8 +316,8 @@ def _parse_hierarchy(lines: list[str], source: str) -> list[BvhJoint]:
         line = tokens.line
         keyword = tokens.take("ROOT")
         if keyword.upper() != "ROOT":
-            raise BvhError(source, f"expected ROOT or MOTION, found {keyword!r}", line)
-        _parse_joint(tokens, joints, parent=-1, end_site=False)
+            raise BvhError(source, f"expected ROOT or MOTION, found {quoted(keyword)}", line)
+        _parse_tree(tokens, joints)
     first_line: dict[str, int] = {}
     for joint in joints:
         if joint.name in first_line:
@@ -306,8 +330,34 @@ def _parse_hierarchy(lines: list[str], source: str) -> list[BvhJoint]:
     return joints
 
 
-def _parse_joint(tokens: _Tokens, joints: list[BvhJoint], parent: int, end_site: bool) -> None:
+def _parse_tree(tokens: _Tokens, joints: list[BvhJoint]) -> None:
+    """The joints of one ROOT (its keyword read) and all below it, appended to `joints`:
+    read without recursion, the open joints on a stack at most `MAX_DEPTH` deep."""
+    open_joints = [_open_joint(tokens, joints, parent=-1, end_site=False)]
+    while open_joints:
+        joint = joints[open_joints[-1]]
+        line = tokens.line
+        token = tokens.take("'}' closing " + joint.name)
+        upper = token.upper()
+        if token == "}":
+            open_joints.pop()
+        elif joint.end_site:
+            raise BvhError(tokens.source, f"unexpected {quoted(token)} inside End Site", line)
+        elif upper not in ("JOINT", "END"):
+            raise BvhError(tokens.source, f"unexpected {quoted(token)} in joint {joint.name}", line)
+        elif len(open_joints) >= MAX_DEPTH:
+            raise BvhError(tokens.source, f"joints nest deeper than {MAX_DEPTH} levels", line)
+        else:
+            end_site = upper == "END"
+            open_joints.append(_open_joint(tokens, joints, open_joints[-1], end_site))
+
+
+def _open_joint(tokens: _Tokens, joints: list[BvhJoint], parent: int, end_site: bool) -> int:
+    """Read a joint's name (after its JOINT / ROOT / End keyword), '{', OFFSET and
+    CHANNELS; append it to `joints` and return its index (its children and '}' follow)."""
     line = tokens.line
+    if len(joints) >= MAX_JOINTS:
+        raise BvhError(tokens.source, f"more than {MAX_JOINTS:,} joints", line)
     if end_site:
         tokens.expect("Site")
         name = f"{joints[parent].name}_end"
@@ -315,6 +365,12 @@ def _parse_joint(tokens: _Tokens, joints: list[BvhJoint], parent: int, end_site:
         name = tokens.take("a joint name")
         if name in "{}":
             raise BvhError(tokens.source, "joint without a name", line)
+        if len(name) > MAX_NAME_CHARS:
+            raise BvhError(
+                tokens.source,
+                f"joint name {quoted(name)} is longer than {MAX_NAME_CHARS} characters",
+                line,
+            )
     tokens.expect("{")
     tokens.expect("OFFSET")
     offset = np.array([tokens.number(f"OFFSET of {name}") for _ in range(3)])
@@ -325,22 +381,8 @@ def _parse_joint(tokens: _Tokens, joints: list[BvhJoint], parent: int, end_site:
             raise BvhError(tokens.source, "an End Site cannot have CHANNELS", tokens.line)
         channels = _parse_channels(tokens, name)
     first = joints[-1].first_channel + len(joints[-1].channels) if joints else 0
-    index = len(joints)
     joints.append(BvhJoint(name, parent, offset, channels, first, end_site, line))
-    while True:
-        line = tokens.line
-        token = tokens.take("'}' closing " + name)
-        upper = token.upper()
-        if token == "}":
-            return
-        if end_site:
-            raise BvhError(tokens.source, f"unexpected {token!r} inside End Site", line)
-        if upper == "JOINT":
-            _parse_joint(tokens, joints, index, end_site=False)
-        elif upper == "END":
-            _parse_joint(tokens, joints, index, end_site=True)
-        else:
-            raise BvhError(tokens.source, f"unexpected {token!r} in joint {name}", line)
+    return len(joints) - 1
 
 
 def _parse_channels(tokens: _Tokens, joint: str) -> tuple[str, ...]:
@@ -349,7 +391,15 @@ def _parse_channels(tokens: _Tokens, joint: str) -> tuple[str, ...]:
     count_token = tokens.take("a channel count")
     if not (count_token.isascii() and count_token.isdigit()):
         raise BvhError(
-            tokens.source, f"channel count {count_token!r} of {joint} is not an integer", line
+            tokens.source,
+            f"channel count {quoted(count_token)} of {joint} is not an integer",
+            line,
+        )
+    if len(count_token) > 2 or int(count_token) > _MAX_CHANNELS:
+        raise BvhError(
+            tokens.source,
+            f"{joint} declares {quoted(count_token)} channels; a joint has at most {_MAX_CHANNELS}",
+            line,
         )
     count = int(count_token)
     names = []
@@ -359,7 +409,7 @@ def _parse_channels(tokens: _Tokens, joint: str) -> tuple[str, ...]:
         if normal not in _CHANNELS:
             raise BvhError(
                 tokens.source,
-                f"{joint} declares {count} channels but {token!r} is not a channel name",
+                f"{joint} declares {count} channels but {quoted(token)} is not a channel name",
                 line,
             )
         names.append(normal)
@@ -388,20 +438,24 @@ def _parse_motion_header(
                 raise BvhError(source, f"file ends before '{key.title()}:'", last)
         label, sep, value = line.partition(":")
         if not sep or " ".join(label.split()).lower() != key:
-            raise BvhError(source, f"expected '{key.title()}: ...', found {line!r}", line_no)
+            raise BvhError(source, f"expected '{key.title()}: ...', found {quoted(line)}", line_no)
         values[key] = (value.strip(), line_no)
     (frames_text, frames_line), (time_text, time_line) = values["frames"], values["frame time"]
     if not (frames_text.isascii() and frames_text.isdigit()):
         raise BvhError(
-            source, f"frame count {frames_text!r} is not a whole number of frames", frames_line
+            source,
+            f"frame count {quoted(frames_text)} is not a whole number of frames",
+            frames_line,
         )
+    if len(frames_text.lstrip("0")) > _MAX_FRAME_DIGITS:
+        raise BvhError(source, f"frame count {quoted(frames_text)} is beyond any file", frames_line)
     frames = int(frames_text)
     if frames <= 0:
         raise BvhError(source, "the file has no frames (Frames: 0)", frames_line)
     if not _NUMBER.match(time_text) or not 1e-6 <= float(time_text) < 10:
         raise BvhError(
             source,
-            f"frame time {time_text!r} is not a duration in seconds (1e-6 up to 10)",
+            f"frame time {quoted(time_text)} is not a duration in seconds (1e-6 up to 10)",
             time_line,
         )
     return frames, float(time_text), min(pos, len(text)), line_no + 1
@@ -416,7 +470,7 @@ def _parse_frames(
     if n_channels:
         buffer = np.frombuffer(body.encode("utf-8"), dtype=np.uint8)
         motion = _read_table(buffer, frames, n_channels)
-        if motion is None:
+        if motion is None and _longest_line(buffer) <= _LINE_BYTES_A_VALUE * (n_channels + 1):
             motion = _read_numbers(body)
     if motion is None or motion.shape != (frames, n_channels) or not np.isfinite(motion).all():
         _diagnose_frames(body.split("\n"), first_line, frames, n_channels, source)
@@ -445,6 +499,13 @@ def _read_table(buffer: np.ndarray, frames: int, n_columns: int) -> np.ndarray |
     if len(inexact):
         _convert_inexact(buffer, values, inexact)
     return values[: rows * n_columns].reshape(rows, n_columns)
+
+
+def _longest_line(buffer: np.ndarray) -> int:
+    """Bytes of the longest line of `buffer` (uint8 text, LF line ends)."""
+    ends = np.flatnonzero(buffer == ord("\n"))
+    bounds = np.concatenate([[-1], ends, [len(buffer)]])
+    return int(np.diff(bounds).max()) - 1
 
 
 def _convert_inexact(buffer: np.ndarray, values: np.ndarray, inexact: np.ndarray) -> None:
@@ -495,7 +556,7 @@ def _diagnose_frames(
     row = 0
     last = max((i for i, line in enumerate(lines) if line.strip()), default=-1)
     for i, line in enumerate(lines):
-        values = line.split()
+        values = line.split(maxsplit=n_channels)  # a longer line: its first values, the rest
         if not values:
             continue
         where = first_line + i
@@ -507,14 +568,15 @@ def _diagnose_frames(
             )
         if row >= frames:
             raise BvhError(source, f"more frame lines than 'Frames: {frames}' declares", where)
-        for v in values:
+        for v in values[:n_channels]:
             if not _NUMBER.match(v) and v.lower().lstrip("+-") not in ("nan", "inf", "infinity"):
-                raise BvhError(source, f"frame {row}: {v!r} is not a number", where)
+                raise BvhError(source, f"frame {row}: {quoted(v)} is not a number", where)
         if len(values) != n_channels:
+            short = len(line) <= _LINE_BYTES_A_VALUE * (n_channels + 1)  # counted at once
+            count = len(line.split()) if short else f"more than {n_channels}"
             raise BvhError(
                 source,
-                f"frame {row} has {len(values)} values, the hierarchy declares "
-                f"{n_channels} channels",
+                f"frame {row} has {count} values, the hierarchy declares {n_channels} channels",
                 where,
             )
         if not all(math.isfinite(float(v)) for v in values):

@@ -10,8 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from samba.body import Take, forward_kinematics, resample_times, sample_linear, sample_rotations
+from samba.db import frame_count_problem, frame_rate_problem
 from samba.ingest.bvh import parse_bvh
 from samba.ingest.errors import BvhError
+from samba.ingest.input_files import MAX_FILE_BYTES, read_input
 from samba.ingest.normalize import (
     UNITS,
     UP_AXES,
@@ -42,7 +44,8 @@ class BvhImportOptions:
     'auto' or a signed axis such as '+z'. `handedness`: 'auto' (mirror data whose knees
     bend backwards), 'right' (keep) or 'left' (negate X). `rig`: a rig map, or None to
     detect one. `subject` / `action`: catalog labels ('' derives the subject from CMU
-    style names such as 131_01).
+    style names such as 131_01). `max_file_bytes`: the largest file read (bytes; also
+    of the .mcap takes of an import).
     """
 
     fps: float | None = 30.0
@@ -54,10 +57,14 @@ class BvhImportOptions:
     rig: RigMap | None = None
     subject: str = ""
     action: str = ""
+    max_file_bytes: int = MAX_FILE_BYTES
 
     def __post_init__(self) -> None:
-        if self.fps is not None and not 0 < self.fps < float("inf"):
-            raise ValueError(f"--fps must be positive and finite, got {self.fps}")
+        problem = None if self.fps is None else frame_rate_problem(self.fps)
+        if problem:
+            raise ValueError(f"--fps: {problem}")
+        if self.max_file_bytes <= 0:
+            raise ValueError(f"--max-file-mb must be positive, got {self.max_file_bytes / 1e6:g}")
         if self.skip_frames < 0:
             raise ValueError(f"--skip-frames must be >= 0, got {self.skip_frames}")
         if self.units != "auto" and self.units not in UNITS:
@@ -78,10 +85,7 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
     options = options or BvhImportOptions()
     path = Path(path)
     source = str(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise BvhError(source, f"cannot read file: {exc.strerror or exc}") from exc
+    data = read_input(path, options.max_file_bytes, BvhError)
     bvh = parse_bvh(data, source=source)
     rig, joints = map_rig(bvh.names, source, bvh.skeleton, options.rig)
     if options.skip_frames >= bvh.n_frames:
@@ -90,6 +94,10 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
         )
     subset = bvh.ancestry(joints)
     fps = options.fps or bvh.fps
+    frames_out = int((bvh.n_frames - 1 - options.skip_frames) * fps / bvh.fps) + 1
+    problem = frame_count_problem(frames_out)
+    if problem:
+        raise BvhError(source, f"read at {fps:g} fps: {problem}")
     times = resample_times(bvh.n_frames - options.skip_frames, bvh.fps, fps)
     lo = np.floor(times + 1e-9).astype(np.int64)
     frac = np.clip(times - lo, 0.0, 1.0)

@@ -7,10 +7,11 @@ import argparse
 import sys
 from typing import Any
 
-from samba.base import InputError
-from samba.db import PoseStore
+from samba.base import InputError, positive_float
+from samba.db import PoseStore, id_text
 from samba.ingest.batch import import_paths
 from samba.ingest.bvh_take import BvhImportOptions
+from samba.ingest.input_files import MAX_FILE_BYTES
 from samba.ingest.normalize import UNITS, UP_AXES
 from samba.ingest.rigs import BUILTIN_RIGS, RigMap, rig_by_name
 
@@ -52,6 +53,13 @@ def add_import_action(sub: Any) -> None:
         help="drop the first N frames of every file",
     )
     p.add_argument("--skip-tpose", action="store_true", help="drop leading T-pose frames")
+    p.add_argument(
+        "--max-file-mb",
+        type=positive_float,
+        default=MAX_FILE_BYTES / 1e6,
+        metavar="MB",
+        help=f"largest file read, in MB (default {MAX_FILE_BYTES / 1e6:g}); larger files fail",
+    )
     p.add_argument(
         "--units",
         default="auto",
@@ -98,6 +106,7 @@ def _import(args: argparse.Namespace) -> int:
             rig=rig,
             subject=args.subject,
             action=args.action,
+            max_file_bytes=int(args.max_file_mb * 1e6),
         )
     except ValueError as exc:
         raise InputError("flags", str(exc)) from exc
@@ -118,7 +127,7 @@ def _import(args: argparse.Namespace) -> int:
     for r in results:
         name = r.path if len(r.path) <= 40 else "..." + r.path[-37:]
         note = r.error or "; ".join(r.warnings)
-        ids = ",".join(map(str, r.take_ids))
+        ids = ",".join(map(id_text, r.take_ids))
         print(
             f"{name:40} {r.status:9} {r.frames_in:9d} {r.frames_kept:6d}  {r.rig:9} "
             f"{ids} {note}".rstrip()

@@ -9,7 +9,6 @@ as `samba.ingest.mcap_take.read_take` does for its poses (interpolated across sh
 from __future__ import annotations
 
 import base64
-import json
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +17,8 @@ from mcap.records import Message
 from samba.body import MARKER_NAMES, N_MARKERS
 from samba.ingest.c3d_take import MarkerTake, read_c3d
 from samba.ingest.errors import TakeFileError
+from samba.ingest.input_files import clipped
+from samba.ingest.json_messages import json_message
 from samba.ingest.marker_sets import PLUG_IN_GAIT, MarkerSet
 from samba.ingest.mcap_take import on_the_clock, read_topic
 
@@ -49,7 +50,7 @@ def read_recorded_markers(path: str | Path) -> MarkerTake:
     if not recorded.values:
         raise TakeFileError(str(path), f"holds no {MARKER_TOPIC} messages (no recorded markers)")
     frames, times, fps, meta = recorded.values, recorded.times, recorded.fps, recorded.meta
-    markers, gaps = on_the_clock(np.stack(frames), np.array(times, dtype=np.int64), fps)
+    markers, gaps = on_the_clock(np.stack(frames), np.array(times, dtype=np.int64), fps, str(path))
     markers = np.asarray(markers, dtype=np.float64)
     notes = [gaps] if gaps else []
     if recorded.cut:
@@ -70,13 +71,13 @@ def read_recorded_markers(path: str | Path) -> MarkerTake:
 def _markers(message: Message, source: str, index: int) -> np.ndarray:
     """The (8, 3) markers of a `/markers` message, meters, NaN where absent."""
     where = f"{MARKER_TOPIC} message {index}"
+    cloud = json_message(message.data, source, where)
     try:
-        cloud = json.loads(message.data)
         if cloud["point_stride"] != _POINT.itemsize:
             raise ValueError(f"point stride {cloud['point_stride']}, not {_POINT.itemsize}")
         points = np.frombuffer(base64.b64decode(cloud["data"], validate=True), dtype=_POINT)
     except (KeyError, ValueError, TypeError) as exc:
-        raise TakeFileError(source, f"{where} is malformed: {exc}") from None
+        raise TakeFileError(source, f"{where} is malformed: {clipped(str(exc))}") from None
     if (points["marker"] >= N_MARKERS).any():
         raise TakeFileError(source, f"{where} names a marker beyond the {N_MARKERS}")
     markers = np.full((N_MARKERS, 3), np.nan)

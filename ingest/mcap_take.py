@@ -7,7 +7,7 @@ footer (the recorder died before `close`) yields every frame of its complete chu
 
 from __future__ import annotations
 
-import json
+import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +19,10 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import MCAP0_MAGIC
 
 from samba.body import N_JOINTS, Take
+from samba.db import frame_count_problem, frame_rate_problem
 from samba.ingest.errors import TakeFileError
+from samba.ingest.input_files import MAX_FILE_BYTES, clipped, open_input, quoted
+from samba.ingest.json_messages import json_message
 
 POSE_TOPIC = "/pose_raw"
 """Topic of the reconstructed poses (`samba.PoseRaw` JSON: `joints` 13 x [x, y, z] meters)."""
@@ -35,7 +38,7 @@ MAX_INTERPOLATED_GAP_S = 0.5
 across a longer one the last pose before it is held."""
 
 
-def read_take(path: str | Path) -> Take:
+def read_take(path: str | Path, max_bytes: int = MAX_FILE_BYTES) -> Take:
     """The take recorded in the MCAP file `path`: poses (n, 13, 3) float32 meters from
     `/pose_raw`, fps and name from the `take` metadata, rig "live".
 
@@ -49,12 +52,12 @@ def read_take(path: str | Path) -> Take:
     A file cut short (no footer) gives the frames before the cut, with a warning in
     `Take.warnings` saying so and how many frames were recovered. The subject's skin
     offsets, when the take has them, are in `Take.meta["skin_offsets"]` (JSON). Raises
-    `TakeFileError` naming the file when it cannot be read, is not MCAP, or holds no
-    recorded frame.
+    `TakeFileError` naming the file when it cannot be read (not a regular file, over
+    `max_bytes` bytes), is not MCAP, or holds no recorded frame.
     """
     path = Path(path)
     source = str(path)
-    recorded = read_topic(path, POSE_TOPIC, _pose)
+    recorded = read_topic(path, POSE_TOPIC, _pose, max_bytes)
     if not recorded.values:
         cut = recorded.cut
         raise TakeFileError(
@@ -63,7 +66,7 @@ def read_take(path: str | Path) -> Take:
     poses, times, fps, cut = recorded.values, recorded.times, recorded.fps, recorded.cut
     meta, subject = recorded.meta, recorded.subject
     warnings = []
-    regular, gaps = on_the_clock(np.stack(poses), np.array(times, dtype=np.int64), fps)
+    regular, gaps = on_the_clock(np.stack(poses), np.array(times, dtype=np.int64), fps, source)
     if gaps:
         warnings.append(gaps)
     if cut is not None and _ends_whole(path):
@@ -104,24 +107,25 @@ class RecordedTopic:
 
 
 def read_topic(
-    path: Path, topic: str, decode: Callable[[Message, str, int], np.ndarray]
+    path: Path,
+    topic: str,
+    decode: Callable[[Message, str, int], np.ndarray],
+    max_bytes: int = MAX_FILE_BYTES,
 ) -> RecordedTopic:
     """Every message of `topic` in the take recorded in the MCAP file `path`, decoded by
     `decode(message, source, index)`, read as a stream of records (a file without a
     footer gives its complete chunks). `TakeFileError` naming the file when it cannot be
-    read, is not MCAP, or has no take metadata with a valid fps."""
+    read (not a regular file, over `max_bytes` bytes), is not MCAP, or has no take
+    metadata with a frame rate a store accepts (`samba.db.frame_rate_problem`)."""
     source = str(path)
-    try:
-        stream = path.open("rb")
-    except OSError as exc:
-        raise TakeFileError(source, f"cannot read file: {exc.strerror or exc}") from exc
+    stream = open_input(path, max_bytes, TakeFileError)
     meta: dict[str, str] | None = None
     subject: dict[str, str] = {}
     channels: set[int] = set()
     values: list[np.ndarray] = []
     times: list[int] = []
     with stream:
-        records = _RecordStream(stream, path.stat().st_size)
+        records = _RecordStream(stream, os.fstat(stream.fileno()).st_size)
         for record in records:
             if isinstance(record, Metadata) and record.name == TAKE_METADATA:
                 meta = dict(record.metadata)
@@ -139,13 +143,18 @@ def read_topic(
     try:
         fps = float(meta.get("fps", ""))
     except ValueError:
-        fps = 0.0
-    if not 0 < fps < float("inf"):
-        raise TakeFileError(source, f"take metadata has no valid fps: {meta.get('fps')!r}")
+        raise TakeFileError(
+            source, f"take metadata has no valid fps: {quoted(str(meta.get('fps')))}"
+        ) from None
+    problem = frame_rate_problem(fps)
+    if problem:
+        raise TakeFileError(source, f"take metadata: {problem}")
     return RecordedTopic(meta, subject, values, times, fps, records.error)
 
 
-def on_the_clock(poses: np.ndarray, times_ns: np.ndarray, fps: float) -> tuple[np.ndarray, str]:
+def on_the_clock(
+    poses: np.ndarray, times_ns: np.ndarray, fps: float, source: str
+) -> tuple[np.ndarray, str]:
     """Poses (n, 13, 3) (or any frames (n, k, 3), such as markers) captured at `times_ns`
     (n,) integer nanoseconds, on a regular grid at `fps` frames per second from the first
     capture to the last, and what was done in words ("" when the frames were already
@@ -153,7 +162,9 @@ def on_the_clock(poses: np.ndarray, times_ns: np.ndarray, fps: float) -> tuple[n
 
     Frames out of order are sorted and frames of one capture time kept once. A gap
     (a step over `GAP_PERIODS` periods) up to `MAX_INTERPOLATED_GAP_S` long is bridged by
-    linear interpolation; across a longer one the last pose before it is held."""
+    linear interpolation; across a longer one the last pose before it is held.
+    `TakeFileError` naming the take file `source` when the grid would hold more frames
+    than a take may (`samba.db.MAX_TAKE_FRAMES`)."""
     order = np.argsort(times_ns, kind="stable")
     times_ns, keep = np.unique(times_ns[order], return_index=True)
     poses = poses[order][keep]
@@ -163,7 +174,11 @@ def on_the_clock(poses: np.ndarray, times_ns: np.ndarray, fps: float) -> tuple[n
     gap_steps = steps > GAP_PERIODS * period
     if not gap_steps.any():
         return poses, ""
-    grid = np.arange(int(np.floor(seconds[-1] * fps + 0.5)) + 1) / fps
+    frames = int(np.floor(seconds[-1] * fps + 0.5)) + 1
+    problem = frame_count_problem(frames)
+    if problem:
+        raise TakeFileError(source, f"spans {seconds[-1]:.6g} s at {fps:g} fps: {problem}")
+    grid = np.arange(frames) / fps
     after = np.clip(np.searchsorted(seconds, grid, side="right"), 1, len(seconds) - 1)
     before = after - 1
     span = seconds[after] - seconds[before]
@@ -209,7 +224,7 @@ class _RecordStream:
             except StopIteration:
                 return
             except Exception as exc:  # mcap, struct, zstandard and lz4 each raise their own
-                self.error = f"{type(exc).__name__}: {exc}".removesuffix(": ")
+                self.error = clipped(f"{type(exc).__name__}: {exc}".removesuffix(": "))
                 return
             self.count += 1
             yield record
@@ -218,13 +233,13 @@ class _RecordStream:
 def _pose(message: Message, source: str, index: int) -> np.ndarray:
     """The (13, 3) joints of a `/pose_raw` message, float32 meters."""
     where = f"/pose_raw message {index}"
+    document = json_message(message.data, source, where)
     try:
-        document = json.loads(message.data)
         joints = np.array(document["joints"], dtype=np.float32)
     except KeyError:
         raise TakeFileError(source, f"{where} has no 'joints'") from None
     except (ValueError, TypeError) as exc:
-        raise TakeFileError(source, f"{where} is malformed: {exc}") from exc
+        raise TakeFileError(source, f"{where} is malformed: {clipped(str(exc))}") from exc
     if joints.shape != (N_JOINTS, 3):
         raise TakeFileError(source, f"{where}: joints of shape {joints.shape}, not (13, 3)")
     if not np.isfinite(joints).all():

@@ -115,7 +115,7 @@ def test_unknown_store_take_and_non_bvh_input(
 ) -> None:
     PoseStore.create(tmp_path / "db")
     assert run("nosuchtake", "--db", tmp_path / "db", "-o", tmp_path / "x.glb") == 1
-    assert "no take matching 'nosuchtake'" in capsys.readouterr().err
+    assert "no take named 'nosuchtake'" in capsys.readouterr().err
     assert run(tmp_path / "take.mp4", "-o", tmp_path / "x.glb") == 1
     assert "take.mp4: not a .bvh file" in capsys.readouterr().err
 

@@ -139,15 +139,15 @@ def test_same_content_is_a_no_op(store: PoseStore, path: Path) -> None:
 
 def test_take_by_id_name_and_numpy_integer(store: PoseStore) -> None:
     assert store.take(2).name == "b"
-    assert store.take("2").name == "b"
+    assert store.take("#2").name == "b"
     assert store.take("c").id == 3
     assert store.take(store.take_ids[-1]).name == "c"  # an np.int32 from the row arrays
-    with pytest.raises(StoreError, match="no take"):
+    with pytest.raises(StoreError, match="no take named 'nope'"):
         store.take("nope")
-    with pytest.raises(StoreError, match="no take"):
+    with pytest.raises(StoreError, match="no take with id #99"):
         store.take(99)
     store.add(make_take("a", 10, seed=9))  # a second take named "a"
-    with pytest.raises(StoreError, match="2 takes"):
+    with pytest.raises(StoreError, match=r"2 takes are named 'a' \(#1, #4\): name one by its id"):
         store.take("a")
 
 
