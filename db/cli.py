@@ -33,11 +33,12 @@ TAKE_HELP = "take name, or id written '#3' (quoted: the shell reads # as a comme
 def add_create_action(sub: Any) -> None:
     """Add `init` to the `samba db` actions `sub`."""
     p = sub.add_parser("init", help="create an empty pose store")
-    p.add_argument("store", help="directory to create")
+    p.add_argument("store", metavar="STORE", help="directory to create")
     p.add_argument(
         "--scale-by-tibia",
         action="store_true",
-        help="index poses scaled to a common tibia length (finds poses of other body sizes)",
+        help="index poses scaled to a common tibia length, which finds poses of other body "
+        "sizes (default: as recorded)",
     )
     p.set_defaults(run=_init)
 
@@ -46,48 +47,48 @@ def add_store_actions(sub: Any) -> None:
     """Add `ls`, `show`, `label`, `rm`, `verify`, `stats`, `tree` and `query` to the
     `samba db` actions `sub`."""
     p = sub.add_parser("ls", help="list takes")
-    p.add_argument("store")
+    p.add_argument("store", metavar="STORE", help="pose store directory")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(run=_ls)
 
     p = sub.add_parser("show", help="show one take")
-    p.add_argument("store")
+    p.add_argument("store", metavar="STORE", help="pose store directory")
     p.add_argument("take", help=TAKE_HELP)
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(run=_show)
 
     p = sub.add_parser("label", help="set a take's subject, action or tags")
-    p.add_argument("store")
+    p.add_argument("store", metavar="STORE", help="pose store directory")
     p.add_argument("take", help=TAKE_HELP)
-    p.add_argument("--subject")
-    p.add_argument("--action")
+    p.add_argument("--subject", help="subject label (default: unchanged)")
+    p.add_argument("--action", help="action label (default: unchanged)")
     p.add_argument(
         "--tag",
         action="append",
         dest="tags",
         metavar="TAG",
-        help="tag (repeat for several; replaces the take's tags)",
+        help="tag (repeat for several; replaces the take's tags; default: unchanged)",
     )
     p.set_defaults(run=_label)
 
     p = sub.add_parser("rm", help="delete takes (with their mirrors)")
-    p.add_argument("store")
+    p.add_argument("store", metavar="STORE", help="pose store directory")
     p.add_argument("takes", nargs="+", help=TAKE_HELP)
     p.set_defaults(run=_rm)
 
     p = sub.add_parser("verify", help="check catalog, pose data and index")
-    p.add_argument("store")
+    p.add_argument("store", metavar="STORE", help="pose store directory")
     p.set_defaults(run=_verify)
 
     p = sub.add_parser("stats", help="counts and sizes")
-    p.add_argument("store")
+    p.add_argument("store", metavar="STORE", help="pose store directory")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(run=_stats)
 
     _add_tree(sub)
 
     p = sub.add_parser("query", help="k nearest poses to a marker observation")
-    p.add_argument("store")
+    p.add_argument("store", metavar="STORE", help="pose store directory")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument(
         "--markers",
@@ -103,7 +104,7 @@ def add_store_actions(sub: Any) -> None:
         "--drop",
         default="",
         metavar="MARKER,...",
-        help="treat these markers as missing (e.g. l_wrist,r_knee)",
+        help="treat these markers as missing, e.g. l_wrist,r_knee (default: none)",
     )
     p.add_argument("-k", type=int, default=10, help="number of neighbours (default 10)")
     p.add_argument(
@@ -122,8 +123,8 @@ def _add_tree(sub: Any) -> None:
         "camera, cluster them into the shape tree of single-camera tracking (samba "
         "track-video) and save it in STORE/shape_trees/.",
     )
-    p.add_argument("store")
-    p.add_argument("--calib", required=True, help="camera calibration TOML")
+    p.add_argument("store", metavar="STORE", help="pose store directory")
+    p.add_argument("--calib", required=True, metavar="FILE", help="camera calibration TOML")
     add_camera_arguments(p)
     p.add_argument(
         "--headings",
@@ -138,13 +139,28 @@ def _add_tree(sub: Any) -> None:
 
 def add_camera_arguments(parser: argparse.ArgumentParser) -> None:
     """The flags that pick the camera, the body model and the home point."""
-    parser.add_argument("--camera", help="camera name or index in the calibration (default 0)")
-    body = parser.add_mutually_exclusive_group()
-    body.add_argument("--body", help="body model name (see samba.body.body_model catalog)")
-    body.add_argument(
-        "--height", type=positive_float, help="subject height in meters: nearest body model"
+    parser.add_argument(
+        "--camera",
+        metavar="ID",
+        help="camera name, or its index in the calibration (default 0: the first)",
     )
-    parser.add_argument("--kind", choices=KINDS, help="with --height: men, women or children")
+    body = parser.add_mutually_exclusive_group()
+    body.add_argument(
+        "--body",
+        metavar="NAME",
+        help="body model name, e.g. men-L (a wrong name lists them; default: by --height)",
+    )
+    body.add_argument(
+        "--height",
+        type=positive_float,
+        metavar="M",
+        help="subject height in meters: nearest body model (default 1.70)",
+    )
+    parser.add_argument(
+        "--kind",
+        choices=KINDS,
+        help="with --height: men, women or children (default: the nearest of all)",
+    )
     parser.add_argument(
         "--home",
         metavar="X,Z",

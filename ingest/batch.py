@@ -44,6 +44,16 @@ class FileResult:
     error: str = ""
 
 
+class ImportInterrupted(KeyboardInterrupt):
+    """Ctrl-C during `import_paths`: `done` holds the results of the files read and
+    committed before it, of `total` files."""
+
+    def __init__(self, done: list[FileResult], total: int) -> None:
+        super().__init__()
+        self.done = done
+        self.total = total
+
+
 def expand_paths(paths: Iterable[str | Path]) -> list[Path]:
     """Files named directly, plus every motion file found (recursively) in named folders.
 
@@ -79,7 +89,8 @@ def import_paths(
     already stored, or comes in an earlier file, is a duplicate. The index is rebuilt
     once at the end. A store whose catalog or pose data is damaged
     (`PoseStore.check_catalog`, `check_poses`) raises StoreError before anything is
-    written. `progress` None shows a bar on a terminal only.
+    written. `progress` None shows a bar on a terminal only. Ctrl-C raises
+    `ImportInterrupted` with the results of the files committed before it.
     """
     files = expand_paths(paths)
     store.check_catalog()  # nothing goes into a damaged store
@@ -87,18 +98,21 @@ def import_paths(
     results: list[FileResult] = []
     group = _CommitGroup(store, mirror, min_change, results)
     bar = tqdm(files, unit="file", disable=None if progress is None else not progress)
-    for path in bar:
-        bar.set_postfix_str(path.name, refresh=False)
-        try:
-            take = _load_take(path, options)
-            check_addable(take)
-        except Exception as exc:  # a bad file fails alone, whatever its error
-            results.append(FileResult(str(path), "failed", error=_failure(path, exc)))
-            continue
-        group.hold(path, take)
-        if len(group) >= commit_files or group.waited() >= commit_seconds:
-            group.commit()
-    group.commit()
+    try:
+        for path in bar:
+            bar.set_postfix_str(path.name, refresh=False)
+            try:
+                take = _load_take(path, options)
+                check_addable(take)
+            except Exception as exc:  # a bad file fails alone, whatever its error
+                results.append(FileResult(str(path), "failed", error=_failure(path, exc)))
+                continue
+            group.hold(path, take)
+            if len(group) >= commit_files or group.waited() >= commit_seconds:
+                group.commit()
+        group.commit()
+    except KeyboardInterrupt:
+        raise ImportInterrupted([r for r in results if r.status != "waiting"], len(files)) from None
     if any(r.status == "added" for r in results):
         store.build_index()
     return results

@@ -150,7 +150,10 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
     positions[..., 1] -= floor_height(positions, fps)
     leg = leg_length(positions)
     if not 0.4 <= leg <= 1.2:
-        warnings.append(f"leg length {leg:.2f} m is implausible: check --units (read as {units})")
+        warnings.append(
+            f"leg length {leg:.2f} m is implausible: is the file in {units}? (samba db "
+            "import --units sets the unit)"
+        )
 
     subject = options.subject
     match = _CMU_NAME.search(path.stem)

@@ -4,12 +4,13 @@ store (`samba.ingest.import_paths`), a table of what became of each file."""
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from typing import Any
 
 from samba.base import InputError, positive_float
 from samba.db import PoseStore, id_text
-from samba.ingest.batch import import_paths
+from samba.ingest.batch import FileResult, ImportInterrupted, import_paths
 from samba.ingest.bvh_take import BvhImportOptions
 from samba.ingest.input_files import MAX_FILE_BYTES
 from samba.ingest.normalize import UNITS, UP_AXES
@@ -29,30 +30,45 @@ def add_marker_set_argument(parser: Any) -> None:
 
 def add_import_action(sub: Any) -> None:
     """Add `import` to the `samba db` actions `sub`."""
-    p = sub.add_parser("import", help="import BVH files or folders of them, or .mcap takes")
-    p.add_argument("store", help="pose store directory")
+    text = "import BVH files or folders of them, or .mcap takes"
+    p = sub.add_parser(
+        "import",
+        help=text,
+        description=f"{text.capitalize()} into a pose store: a table of what became of "
+        "each file. A file already stored is a duplicate, whatever the flags: remove its "
+        "take (samba db rm) to read it again with other flags.",
+    )
+    p.add_argument("store", metavar="STORE", help="pose store directory")
     p.add_argument(
         "paths",
         nargs="+",
         help="BVH files, recorded .mcap takes, and/or folders (searched recursively for both)",
     )
-    p.add_argument("--mirror", action="store_true", help="also store left/right mirror images")
+    p.add_argument(
+        "--mirror",
+        action="store_true",
+        help="also store left/right mirror images (default: the takes as they are)",
+    )
     p.add_argument(
         "--min-change",
         type=float,
         default=0.0,
         metavar="M",
-        help="drop consecutive poses where no joint moved more than M meters",
+        help="drop consecutive poses where no joint moved more than M meters (default 0: keep all)",
     )
-    p.add_argument("--fps", type=float, default=30.0, help="database frame rate (default 30)")
+    p.add_argument(
+        "--fps", type=float, default=30.0, metavar="N", help="database frame rate (default 30)"
+    )
     p.add_argument(
         "--skip-frames",
         type=int,
         default=0,
         metavar="N",
-        help="drop the first N frames of every file",
+        help="drop the first N frames of every file (default 0)",
     )
-    p.add_argument("--skip-tpose", action="store_true", help="drop leading T-pose frames")
+    p.add_argument(
+        "--skip-tpose", action="store_true", help="drop leading T-pose frames (default: keep)"
+    )
     p.add_argument(
         "--max-file-mb",
         type=positive_float,
@@ -79,11 +95,26 @@ def add_import_action(sub: Any) -> None:
         help="coordinate handedness (default: detected from knee bending)",
     )
     rigs = ", ".join(r.name for r in BUILTIN_RIGS)
-    p.add_argument("--rig", help=f"force a built-in rig ({rigs})")
-    p.add_argument("--map", metavar="FILE.toml", help="joint mapping file for other rigs")
-    p.add_argument("--subject", default="", help="subject label for every take")
-    p.add_argument("--action", default="", help="action label for every take")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--rig", metavar="NAME", help=f"force a built-in rig ({rigs}; default: detected)"
+    )
+    p.add_argument(
+        "--map",
+        metavar="FILE.toml",
+        help="joint mapping file for other rigs (samba db rig --write-map writes one; "
+        "default: detected)",
+    )
+    p.add_argument(
+        "--subject",
+        default="",
+        help="subject label for every take (default: from CMU-style names such as 131_01)",
+    )
+    p.add_argument("--action", default="", help="action label for every take (default: none)")
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress bar (default: a bar on a terminal)",
+    )
     p.set_defaults(run=_import)
 
 
@@ -113,24 +144,32 @@ def _import(args: argparse.Namespace) -> int:
     if args.min_change < 0:
         raise InputError("--min-change", f"must be >= 0, got {args.min_change}")
     store = PoseStore.open(args.store)
-    results = import_paths(
-        store,
-        args.paths,
-        options,
-        mirror=args.mirror,
-        min_change=args.min_change,
-        progress=False if args.no_progress else None,
-    )
+    try:
+        results = import_paths(
+            store,
+            args.paths,
+            options,
+            mirror=args.mirror,
+            min_change=args.min_change,
+            progress=False if args.no_progress else None,
+        )
+    except ImportInterrupted as stop:
+        added = sum(r.status == "added" for r in stop.done)
+        print(
+            f"samba: interrupted: {len(stop.done)} of {stop.total} files done, {added} of "
+            f"them added and committed; the store holds those, the rest was not imported",
+            file=sys.stderr,
+        )
+        return 130
     if not results:
-        raise InputError(" ".join(args.paths), "no .bvh files found")
+        raise InputError(" ".join(args.paths), "no .bvh or .mcap files found")
     print(f"{'file':40} {'status':9} {'frames in':>9} {'kept':>6}  {'rig':9} takes / notes")
     for r in results:
         name = r.path if len(r.path) <= 40 else "..." + r.path[-37:]
-        note = r.error or "; ".join(r.warnings)
         ids = ",".join(map(id_text, r.take_ids))
         print(
             f"{name:40} {r.status:9} {r.frames_in:9d} {r.frames_kept:6d}  {r.rig:9} "
-            f"{ids} {note}".rstrip()
+            f"{ids} {_note(r, args.store)}".rstrip()
         )
     failed = [r for r in results if r.status == "failed"]
     added = sum(r.status == "added" for r in results)
@@ -143,3 +182,15 @@ def _import(args: argparse.Namespace) -> int:
     for r in failed:
         print(f"samba: error: {r.error}", file=sys.stderr)
     return 1 if failed else 0
+
+
+def _note(result: FileResult, store: str) -> str:
+    """The table's note on one file: its error, its warnings, and for a duplicate how to
+    read it again (the store keeps the first reading whatever the flags)."""
+    note = result.error or "; ".join(result.warnings)
+    if result.status == "duplicate":
+        take = id_text(result.take_ids[0])
+        rm = shlex.join(["samba", "db", "rm", store, take])
+        again = f"already stored as take {take}: {rm} to import it anew"
+        note = f"{again}; {note}" if note else again
+    return note

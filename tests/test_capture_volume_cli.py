@@ -15,7 +15,7 @@ from markerless_fixtures import SENSOR_NOISE, write_image_folder
 from test_track_video import _assert_one_line_error, samba
 
 from samba.body.body_model import BodyModel, scaled_to
-from samba.cameras.calibration_file import write_calibration
+from samba.cameras.calibration_file import read_calibration, write_calibration
 from samba.cameras.camera import Camera
 from samba.ingest.bvh import read_bvh
 from samba.silhouette.person_render import person_frames, stage_background
@@ -202,11 +202,22 @@ def test_one_video_per_camera_is_needed(stage: Stage, tmp_path: Path) -> None:
     assert not out.exists()
 
 
+def test_a_one_camera_calibration_is_refused_before_any_work(stage: Stage, tmp_path: Path) -> None:
+    one = tmp_path / "one.toml"
+    write_calibration(one, list(read_calibration(stage.calibration))[:1])
+    out = tmp_path / "take.bvh"
+    code, _, err = samba(
+        "capture-volume", stage.videos[0], "--calib", one, "-o", out, "--empty-frames", "3"
+    )
+    _assert_one_line_error(code, err, one, "has 1 camera; a visual hull needs at least 2")
+    assert not out.exists()
+
+
 def test_an_existing_output_is_left_unchanged(stage: Stage, tmp_path: Path) -> None:
     out = tmp_path / "take.bvh"
     out.write_bytes(b"an earlier capture")
     code, _, err = capture(stage, stage.videos, out, "--empty-frames", EMPTY_FRAMES)
-    _assert_one_line_error(code, err, out, "already exists")
+    _assert_one_line_error(code, err, out, "already exists; --force overwrites")
     assert out.read_bytes() == b"an earlier capture"
 
 

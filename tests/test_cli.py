@@ -200,17 +200,26 @@ def test_output_into_a_reader_that_left_ends_quietly(store_with_cmu: Path) -> No
 
 def test_an_unknown_demo_motion_is_refused_before_anything_is_built(tmp_path: Path, capsys) -> None:
     with pytest.raises(SystemExit) as exit_:
-        main(["demo", "--motion", "dance", "--out", str(tmp_path / "demo")])
+        main(["demo", "--motion", "dance", "--out-dir", str(tmp_path / "demo")])
     assert exit_.value.code == 2
     assert "'dance' is neither a built-in motion" in capsys.readouterr().err
     assert not (tmp_path / "demo").exists()
 
 
 def test_demo_captures_live_and_writes_the_take_and_exports(tmp_path: Path, capsys) -> None:
-    code, out, _ = run(
-        capsys, "demo", "--out", str(tmp_path), "--seconds", "1.5", "--vmc", "127.0.0.1:9"
+    earlier = tmp_path / "cameras.toml"
+    earlier.write_text("an earlier demo's")
+    argv = ("demo", "--out-dir", str(tmp_path), "--seconds", "1.5", "--vmc", "127.0.0.1:9")
+    code, out, err = run(capsys, *argv)
+    assert code == 1 and out == ""
+    assert err == (
+        f"samba: error: {earlier}: already exists (an earlier demo); --force overwrites the "
+        "demo's files, or give --out-dir another folder\n"
     )
+    assert list(tmp_path.iterdir()) == [earlier]
+    code, out, _ = run(capsys, *argv, "--force")
     assert code == 0
+    assert f"all kept in {tmp_path}/" in out
     assert "frames out: 90 of 90" in out and "VMC frames received: 90" in out
     assert (tmp_path / "takes" / "demo" / "demo_walk.mcap").is_file()
     assert read_take(tmp_path / "takes" / "demo" / "demo_walk.mcap").poses.shape == (90, 13, 3)
@@ -229,7 +238,9 @@ def test_an_unwritable_place_gives_one_clear_line(tmp_path: Path, capsys) -> Non
     assert err.startswith("samba: error:") and "Traceback" not in err
 
 
-def test_demo_with_an_avatar_streams_and_exports_onto_it(tmp_path: Path, capsys) -> None:
+def test_demo_with_an_avatar_streams_and_exports_onto_it(
+    tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """`samba demo --avatar FILE`: the exports carry the avatar's skeleton (here one whose
     Hips joint sits 12 cm above its legs), with its feet on the floor."""
     mannequin = HumanoidRig.from_body()
@@ -240,11 +251,10 @@ def test_demo_with_an_avatar_streams_and_exports_onto_it(tmp_path: Path, capsys)
     write_glb(
         avatar, HumanoidMotion(rig, np.tile([0.0, 0.0, 0.0, 1.0], (1, 17, 1)), rest[:1], 30.0)
     )
+    monkeypatch.chdir(tmp_path)  # the demo's files go to ./samba-demo by default
     code, out, _ = run(
         capsys,
         "demo",
-        "--out",
-        str(tmp_path / "demo"),
         "--seconds",
         "1.5",
         "--vmc",
@@ -253,7 +263,7 @@ def test_demo_with_an_avatar_streams_and_exports_onto_it(tmp_path: Path, capsys)
         str(avatar),
     )
     assert code == 0 and "frames out: 90 of 90" in out
-    names, joints = read_glb_joint_positions(tmp_path / "demo" / "exports" / "demo_walk.glb")
+    names, joints = read_glb_joint_positions(tmp_path / "samba-demo/exports/demo_walk.glb")
     hips, feet = names.index("Hips"), [names.index("LeftFoot"), names.index("RightFoot")]
     leg = names.index("LeftUpperLeg")
     offset = np.linalg.norm(joints[:, hips] - joints[:, leg], axis=-1)

@@ -196,7 +196,7 @@ def test_leading_tpose_is_kept_with_a_warning(tmp_path: Path) -> None:
     assert leading_tpose_frames(fixture.positions) == 2
     take = _load(tmp_path, fixture)
     assert len(take) == 30
-    assert take.warnings == ["starts with 2 T-pose frame(s); --skip-tpose drops them"]
+    assert take.warnings == ["starts with 2 T-pose frame(s) (0.07 s); --skip-tpose drops them"]
     np.testing.assert_allclose(take.poses, fixture.positions, atol=ATOL)
 
 

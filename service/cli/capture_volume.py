@@ -28,7 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
-from samba.base import InputError, finite_float, natural, positive, positive_float
+from samba.base import (
+    InputError,
+    add_force_argument,
+    check_outputs,
+    finite_float,
+    natural,
+    positive,
+    positive_float,
+)
 from samba.cameras import Camera, CameraGroup, camera_frames, read_calibration
 from samba.export import UNITS
 from samba.service.video_capture import write_volume_capture
@@ -60,8 +68,11 @@ def register(parser: argparse.ArgumentParser) -> None:
         metavar="VIDEO",
         help="video file or image folder of each camera, in the order of the cameras in --calib",
     )
-    parser.add_argument("--calib", required=True, help="camera calibration TOML")
-    parser.add_argument("-o", "--out", required=True, help="motion to write (.bvh)")
+    parser.add_argument("--calib", required=True, metavar="FILE", help="camera calibration TOML")
+    parser.add_argument(
+        "-o", "--output", required=True, metavar="FILE.bvh", help="motion to write (.bvh)"
+    )
+    add_force_argument(parser)
     stage = parser.add_mutually_exclusive_group(required=True)
     stage.add_argument(
         "--background",
@@ -82,7 +93,10 @@ def register(parser: argparse.ArgumentParser) -> None:
         "(MediaPipe Pose; set up once on first use, about 430 MB)",
     )
     parser.add_argument(
-        "--method", choices=BACKGROUND_METHODS, default="colour", help="background model"
+        "--method",
+        choices=BACKGROUND_METHODS,
+        default="colour",
+        help="background model (default colour)",
     )
     parser.add_argument(
         "--bounds",
@@ -114,14 +128,23 @@ def register(parser: argparse.ArgumentParser) -> None:
         "carves thin parts (the feet) away (default: 0)",
     )
     parser.add_argument(
-        "--fps", type=positive_float, default=30.0, help="frame rate of the videos (default: 30)"
+        "--fps",
+        type=positive_float,
+        default=30.0,
+        metavar="N",
+        help="frame rate of the videos (default: 30)",
     )
     parser.add_argument(
-        "--lowpass", type=positive_float, metavar="HZ", help="low-pass the joint angles at HZ"
+        "--lowpass",
+        type=positive_float,
+        metavar="HZ",
+        help="low-pass the joint angles at HZ (default: as captured)",
     )
     parser.add_argument("--unit", choices=UNITS, default="m", help="BVH length unit (default: m)")
     parser.add_argument(
-        "--joints", metavar="FILE.npz", help="also write the 13 capture joints of a human model"
+        "--joints",
+        metavar="FILE.npz",
+        help="also write the 13 capture joints of a human model (default: none)",
     )
     parser.add_argument(
         "--facing",
@@ -137,12 +160,18 @@ def register(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Capture the videos and write the BVH (and the joints); print what was done. A run
     that fails leaves no output file behind."""
-    out = Path(args.out)
-    _check_output(out, ".bvh", "the motion is written as BVH: give a .bvh file name")
+    out = Path(args.output)
+    _check_suffix(out, ".bvh", "the motion is written as BVH: give a .bvh file name")
     joints_out = Path(args.joints) if args.joints else None
     if joints_out is not None:
-        _check_output(joints_out, ".npz", "the joints are written as a NumPy .npz archive")
+        _check_suffix(joints_out, ".npz", "the joints are written as a NumPy .npz archive")
+    inputs = [*args.videos, *(args.background or []), args.calib]
+    check_outputs([out, *([joints_out] if joints_out else [])], args.force, inputs)
     cameras = read_calibration(args.calib)
+    if len(cameras) < 2:
+        raise InputError(
+            args.calib, f"has {len(cameras)} camera; a visual hull needs at least 2 cameras"
+        )
     _check_per_camera(args.videos, "videos", cameras, args.calib)
     if args.min_views is not None and args.min_views > len(cameras):
         raise InputError(
@@ -242,15 +271,11 @@ def _summary(capture: VolumeCapture, counts: list[int], first: int, out: Path) -
     )
 
 
-def _check_output(path: Path, suffix: str, problem: str) -> None:
-    """`InputError` naming `path` unless it is a new file with `suffix` in an existing
-    folder (`problem` says what the suffix is for)."""
+def _check_suffix(path: Path, suffix: str, problem: str) -> None:
+    """`InputError` naming `path` unless it ends in `suffix` (`problem` says what the
+    suffix is for)."""
     if path.suffix.lower() != suffix:
         raise InputError(str(path), problem)
-    if path.exists():
-        raise InputError(str(path), "already exists; captures are never overwritten")
-    if not path.resolve().parent.is_dir():
-        raise InputError(str(path), "its folder does not exist")
 
 
 def _check_per_camera(

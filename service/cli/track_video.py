@@ -1,4 +1,4 @@
-"""`samba track-video VIDEO --calib FILE --db STORE -o TAKE.mcap`: markerless capture from
+"""`samba track-video VIDEO --calib FILE --db STORE -o FILE.mcap`: markerless capture from
 one ordinary camera (silhouette tracking over the store's shape tree), written as a take.
 
 The empty stage comes from `--background` (a video or image folder of the stage without
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from samba.base import InputError, natural, positive_float
+from samba.base import InputError, add_force_argument, check_outputs, natural, positive_float
 from samba.cameras import Camera, camera_frames, open_frames, sized_frames
 from samba.db import stored_tree
 from samba.db.cli import add_camera_arguments, chosen_body, chosen_camera, chosen_home
@@ -39,15 +39,25 @@ from samba.silhouette import (
 def register(parser: argparse.ArgumentParser) -> None:
     """Add the `track-video` arguments to `parser`."""
     parser.add_argument("video", help="video file or folder of images of one camera")
-    parser.add_argument("--calib", required=True, help="camera calibration TOML")
-    parser.add_argument("--db", required=True, help="pose store (its shape trees)")
-    parser.add_argument("-o", "--out", required=True, help="take to write (.mcap)")
+    parser.add_argument("--calib", required=True, metavar="FILE", help="camera calibration TOML")
+    parser.add_argument("--db", required=True, metavar="STORE", help="pose store (its shape trees)")
+    parser.add_argument(
+        "-o", "--output", required=True, metavar="FILE.mcap", help="take to write (.mcap)"
+    )
+    add_force_argument(parser)
     add_camera_arguments(parser)
-    parser.add_argument("--tree", help="shape tree name in the store (default: CAMERA-BODY)")
+    parser.add_argument(
+        "--tree", metavar="NAME", help="shape tree name in the store (default: CAMERA-BODY)"
+    )
     stage = parser.add_mutually_exclusive_group(required=True)
-    stage.add_argument("--background", help="video or image folder of the empty stage")
     stage.add_argument(
-        "--empty-frames", type=natural, help="the first N frames of VIDEO show the empty stage"
+        "--background", metavar="DIR_OR_VIDEO", help="video or image folder of the empty stage"
+    )
+    stage.add_argument(
+        "--empty-frames",
+        type=natural,
+        metavar="N",
+        help="the first N frames of VIDEO show the empty stage",
     )
     stage.add_argument(
         "--segment",
@@ -56,20 +66,28 @@ def register(parser: argparse.ArgumentParser) -> None:
         "(MediaPipe Pose; set up once on first use, about 430 MB)",
     )
     parser.add_argument(
-        "--method", choices=BACKGROUND_METHODS, default="colour", help="background model"
+        "--method",
+        choices=BACKGROUND_METHODS,
+        default="colour",
+        help="background model (default colour)",
     )
-    parser.add_argument("--fps", type=positive_float, default=30.0, help="frame rate of VIDEO")
+    parser.add_argument(
+        "--fps",
+        type=positive_float,
+        default=30.0,
+        metavar="N",
+        help="frame rate of VIDEO (default 30)",
+    )
     parser.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Track VIDEO and write the take; print what was done. A run that fails leaves no
     take behind."""
-    out = Path(args.out)
+    out = Path(args.output)
     if out.suffix.lower() != ".mcap":
         raise InputError(str(out), "the take is written as MCAP: give a .mcap file name")
-    if out.exists():
-        raise InputError(str(out), "already exists; takes are never overwritten")
+    check_outputs([out], args.force, [args.video, args.calib])
     camera = chosen_camera(args.calib, args.camera)
     view = SilhouetteView(camera, chosen_home(args))
     frames, note = camera_frames(args.video, camera, args.calib)
