@@ -4,7 +4,7 @@ marker takes (C3D files, recorded takes' markers) with their marker sets, and th
 joint centres of a full marker set by published rules.
 """
 
-from samba.ingest.batch import FileResult, expand_paths, import_paths
+from samba.ingest.batch import FileResult, expand_paths, import_paths, read_file
 from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh, reader_kernels
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.c3d_take import MarkerTake, read_c3d
@@ -46,6 +46,7 @@ __all__ = [
     "parse_bvh",
     "read_bvh",
     "read_c3d",
+    "read_file",
     "read_marker_take",
     "read_recorded_markers",
     "read_take",

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
+from typing import Any
 
 from tqdm import tqdm
 
-from samba.base import SambaError
+from samba.base import SambaError, outcomes_in_order
 from samba.body import Take
 from samba.db import AddResult, PoseStore, check_addable
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
@@ -18,6 +20,8 @@ from samba.ingest.mcap_take import read_take
 
 SUFFIXES = (".bvh", ".mcap")
 """Files picked up in named folders: BVH and takes recorded by the live service."""
+FileReader = Callable[[Path, BvhImportOptions | None], Take]
+"""Reads one motion file as a checked take, raising what is wrong (`read_file`)."""
 COMMIT_FILES = 64
 """Most files whose takes `import_paths` commits together."""
 COMMIT_SECONDS = 1.0
@@ -68,6 +72,14 @@ def expand_paths(paths: Iterable[str | Path]) -> list[Path]:
     return out
 
 
+def read_file(path: Path, options: BvhImportOptions | None) -> Take:
+    """The take of the motion file at `path` (BVH, or .mcap: `_load_take`), checked as a
+    store checks it before a commit (`samba.db.check_addable`); raises what is wrong."""
+    take = _load_take(path, options)
+    check_addable(take)
+    return take
+
+
 def import_paths(
     store: PoseStore,
     paths: Iterable[str | Path],
@@ -77,6 +89,8 @@ def import_paths(
     progress: bool | None = None,
     commit_files: int = COMMIT_FILES,
     commit_seconds: float = COMMIT_SECONDS,
+    client: Any = None,
+    read: FileReader = read_file,
 ) -> list[FileResult]:
     """Import every file (folders are searched for .bvh files) into `store`; one result
     per file, in order.
@@ -91,21 +105,21 @@ def import_paths(
     (`PoseStore.check_catalog`, `check_poses`) raises StoreError before anything is
     written. `progress` None shows a bar on a terminal only. Ctrl-C raises
     `ImportInterrupted` with the results of the files committed before it.
+
+    With a Dask `client` (`samba.base.cluster_client`) the files are read (`read`) on its
+    workers, one task each, and committed here in the same order, so the store ends as
+    a serial import leaves it; a file whose worker died each time it was tried fails
+    with `WorkerDeathError`. The bar then counts the files read, in any order.
     """
     files = expand_paths(paths)
     store.check_catalog()  # nothing goes into a damaged store
     store.check_poses()
     results: list[FileResult] = []
     group = _CommitGroup(store, mirror, min_change, results)
-    bar = tqdm(files, unit="file", disable=None if progress is None else not progress)
     try:
-        for path in bar:
-            bar.set_postfix_str(path.name, refresh=False)
-            try:
-                take = _load_take(path, options)
-                check_addable(take)
-            except Exception as exc:  # a bad file fails alone, whatever its error
-                results.append(FileResult(str(path), "failed", error=_failure(path, exc)))
+        for path, take in _readings(files, options, read, progress, client):
+            if isinstance(take, BaseException):  # a bad file fails alone, whatever its error
+                results.append(FileResult(str(path), "failed", error=_failure(path, take)))
                 continue
             group.hold(path, take)
             if len(group) >= commit_files or group.waited() >= commit_seconds:
@@ -180,12 +194,35 @@ def _file_result(path: str, take: Take, added: AddResult) -> FileResult:
     )
 
 
-def _failure(path: Path, exc: Exception) -> str:
+def _failure(path: Path, exc: BaseException) -> str:
     """The one line telling why the file `path` failed with `exc`: a `SambaError`'s own
     message, else the error's type and at most `QUOTE_CHARS` characters of its text."""
     if isinstance(exc, SambaError):
         return str(exc)
     return f"{path}: cannot import: {type(exc).__name__}: {clipped(str(exc))}"
+
+
+def _readings(
+    files: Sequence[Path],
+    options: BvhImportOptions | None,
+    read: FileReader,
+    progress: bool | None,
+    client: Any,
+) -> Iterator[tuple[Path, Take | BaseException]]:
+    """Each file with its take, or the error reading it raised, in file order: read here
+    one after the other, or with a Dask `client` on its workers."""
+    if client is not None:
+        task = partial(read, options=options)
+        yield from outcomes_in_order(client, task, files, progress=progress, unit="file")
+        return
+    bar = tqdm(files, unit="file", disable=None if progress is None else not progress)
+    for path in bar:
+        bar.set_postfix_str(path.name, refresh=False)
+        try:
+            outcome: Take | BaseException = read(path, options)
+        except Exception as exc:
+            outcome = exc
+        yield path, outcome
 
 
 def _load_take(path: Path, options: BvhImportOptions | None) -> Take:

@@ -8,7 +8,7 @@ import shlex
 import sys
 from typing import Any
 
-from samba.base import InputError, positive_float
+from samba.base import InputError, add_cluster_arguments, cluster_client, positive_float
 from samba.db import PoseStore, id_text
 from samba.ingest.batch import FileResult, ImportInterrupted, import_paths
 from samba.ingest.bvh_take import BvhImportOptions
@@ -115,6 +115,7 @@ def add_import_action(sub: Any) -> None:
         action="store_true",
         help="no progress bar (default: a bar on a terminal)",
     )
+    add_cluster_arguments(p)
     p.set_defaults(run=_import)
 
 
@@ -145,14 +146,16 @@ def _import(args: argparse.Namespace) -> int:
         raise InputError("--min-change", f"must be >= 0, got {args.min_change}")
     store = PoseStore.open(args.store)
     try:
-        results = import_paths(
-            store,
-            args.paths,
-            options,
-            mirror=args.mirror,
-            min_change=args.min_change,
-            progress=False if args.no_progress else None,
-        )
+        with cluster_client(args.workers, args.cluster) as client:
+            results = import_paths(
+                store,
+                args.paths,
+                options,
+                mirror=args.mirror,
+                min_change=args.min_change,
+                progress=False if args.no_progress else None,
+                client=client,
+            )
     except ImportInterrupted as stop:
         added = sum(r.status == "added" for r in stop.done)
         print(

@@ -23,3 +23,8 @@ class InputError(SambaError):
         self.line = line
         where = f"{source}:{line}" if line is not None else source
         super().__init__(f"{where}: {problem}")
+
+    def __reduce__(self) -> tuple[type, tuple[str, str, int | None]]:
+        """Pickle by the constructor's arguments, so that the error crosses a process
+        boundary (a Dask worker's task) as it was raised."""
+        return type(self), (self.source, self.problem, self.line)

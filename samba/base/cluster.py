@@ -1,0 +1,152 @@
+"""Dask distributed for the batch commands: `--workers N` (a local cluster of N processes,
+started and closed around the command) or `--cluster ADDRESS` (a running scheduler), and
+one task per item with the outcomes handed back in item order.
+
+Dask is an optional extra (`samba-mocap[cluster]`), imported only here and only when one
+of the flags is given: a command without them starts as fast as before and runs in its own
+process. A task whose worker dies is run once more on another worker; if that worker
+dies too its outcome is a `WorkerDeathError` (`SCHEDULER_SETTINGS`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+from samba.base.arguments import positive
+from samba.base.errors import InputError, SambaError
+
+INSTALL_HINT = "pip install 'samba-mocap[cluster]'"
+"""What installs Dask distributed beside Samba (on the client and on every worker)."""
+CONNECT_SECONDS = 10.0
+"""How long `cluster_client` waits for a scheduler to answer."""
+SCHEDULER_SETTINGS = {
+    "distributed.scheduler.allowed-failures": 1,
+    "distributed.scheduler.worker-saturation": 1.0,
+}
+"""The local cluster's scheduler: a task survives one worker death (it is run again on
+another worker), and a worker holds only the tasks it runs, so that a worker's death
+counts against those alone. A remote scheduler's own configuration decides there."""
+
+
+class WorkerDeathError(SambaError):
+    """The workers that ran a task died each time (a crash, or memory running out)."""
+
+
+def add_cluster_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add `--workers N` and `--cluster ADDRESS` (one or the other) to `parser`."""
+    group = parser.add_argument_group("cluster (Dask distributed, the cluster extra)")
+    choice = group.add_mutually_exclusive_group()
+    choice.add_argument(
+        "--workers",
+        type=positive,
+        metavar="WORKERS",
+        help="run on a local Dask cluster of this many worker processes (default: in this process)",
+    )
+    choice.add_argument(
+        "--cluster",
+        metavar="ADDRESS",
+        help="run on the Dask scheduler at ADDRESS, e.g. tcp://10.0.0.5:8786 "
+        "(default: in this process)",
+    )
+
+
+@contextmanager
+def cluster_client(workers: int | None = None, address: str | None = None) -> Iterator[Any]:
+    """A Dask `Client` of a new local cluster of `workers` single-threaded processes
+    (closed on exit) or of the scheduler at `address`; None (run in-process) without
+    either. `InputError` naming the flag when both are given, `workers` < 1, Dask is not
+    installed or no scheduler answers at `address` within `CONNECT_SECONDS`."""
+    if workers is None and address is None:
+        yield None
+        return
+    flag = f"--workers {workers}" if address is None else f"--cluster {address}"
+    if workers is not None and address is not None:
+        raise InputError("--workers/--cluster", "give one of them, not both")
+    if workers is not None and workers < 1:
+        raise InputError("--workers", f"must be >= 1, got {workers}")
+    try:
+        import dask
+        from distributed import Client, LocalCluster
+    except ImportError as exc:
+        raise InputError(flag, f"needs Dask distributed ({exc}); {INSTALL_HINT}") from None
+    if address is not None:
+        try:
+            client = Client(address, timeout=CONNECT_SECONDS)
+        except (OSError, ValueError, TypeError) as exc:
+            problem = f"no Dask scheduler answers there ({_first_line(exc)})"
+            raise InputError(flag, problem) from None
+        with client:
+            yield client
+        return
+    try:
+        with dask.config.set(SCHEDULER_SETTINGS):
+            cluster = LocalCluster(
+                n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0"
+            )
+    except (OSError, RuntimeError) as exc:
+        raise InputError(flag, f"the local cluster did not start ({_first_line(exc)})") from None
+    with cluster, Client(cluster) as client:
+        yield client
+
+
+def outcomes_in_order(
+    client: Any,
+    task: Callable[..., Any],
+    items: Sequence[Any],
+    shared: Sequence[Any] = (),
+    progress: bool | None = None,
+    unit: str = "item",
+    name: Callable[[Any], str] = str,
+) -> Iterator[tuple[Any, Any]]:
+    """Run `task(item, *shared)` on the cluster of `client` for every item, one task each;
+    yield (item, outcome) in the order of `items`, the outcome being what the task
+    returned or the exception it raised (`WorkerDeathError` naming the item by `name`
+    when the workers running it died). Each of `shared` is sent to every worker once,
+    not once per task: it is a task of its own whose outcome workers copy from each other
+    (and that is run again if every copy is lost with its worker). The progress bar
+    (None: on a terminal only) counts tasks as they finish, in any order."""
+    import dask
+    from distributed import KilledWorker, as_completed
+    from tqdm import tqdm
+
+    with dask.config.set({"distributed.admin.large-graph-warning-threshold": "1TB"}):
+        sent = [client.submit(_itself, value, pure=False) for value in shared]
+    futures = [client.submit(task, item, *sent, pure=False) for item in items]
+    place = {future.key: i for i, future in enumerate(futures)}
+    finished: dict[int, Any] = {}
+    following = 0
+    bar = tqdm(total=len(futures), unit=unit, disable=None if progress is None else not progress)
+    try:
+        for future in as_completed(futures):
+            bar.update()
+            finished[place[future.key]] = future
+            while following in finished:
+                done = finished.pop(following)
+                try:  # waits while a result lost with its worker is computed again
+                    outcome = done.result()
+                except Exception as exc:
+                    outcome = exc
+                done.release()
+                if isinstance(outcome, KilledWorker):
+                    item = items[following]
+                    problem = "the worker running it died each time it was tried"
+                    outcome = WorkerDeathError(f"{name(item)}: {problem}")
+                yield items[following], outcome
+                following += 1
+    finally:
+        bar.close()
+        client.cancel([f for f in futures if not f.done()])
+
+
+def _itself(value: Any) -> Any:
+    """`value`: the task that holds a value `outcomes_in_order` shares."""
+    return value
+
+
+def _first_line(exc: BaseException) -> str:
+    """The first line of an error's text (Dask's connection errors run over several)."""
+    text = str(exc).strip() or type(exc).__name__
+    return text.splitlines()[0]
