@@ -24,8 +24,10 @@ from threadpoolctl import threadpool_limits
 from samba.base import (
     InputError,
     SambaError,
+    add_cluster_arguments,
     add_force_argument,
     check_outputs,
+    cluster_client,
     kernels_enabled,
     positive,
     seconds_range,
@@ -217,6 +219,7 @@ def _register_eval(parser: argparse.ArgumentParser) -> None:
         help="seconds of each take the subject's skin offsets are calibrated on (default 0:2)",
     )
     import_cli.add_marker_set_argument(real)
+    add_cluster_arguments(parser)
     parser.set_defaults(run=_eval)
 
 
@@ -312,16 +315,18 @@ def _eval(args: argparse.Namespace) -> int:
     doc: dict[str, object] = {}
     with threadpool_limits(limits=1):  # the protocol times single-threaded reconstruction
         if test_takes:
-            evaluation = evaluate(
-                train_takes,
-                test_takes,
-                runs,
-                PoseIndex.build,
-                args.seed,
-                args.dropout,
-                args.new_user,
-                progress=None,
-            )
+            with cluster_client(args.workers, args.cluster) as client:
+                evaluation = evaluate(
+                    train_takes,
+                    test_takes,
+                    runs,
+                    PoseIndex.build,
+                    args.seed,
+                    args.dropout,
+                    args.new_user,
+                    progress=None,
+                    client=client,
+                )
             print(report_text(evaluation, args.methods, sweeps))
             doc = document(evaluation, runs, args.methods, sweeps, args.max_frames)
         if real:

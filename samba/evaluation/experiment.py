@@ -11,15 +11,17 @@ the JSON document, `write_plots` the PNG plots (`samba.evaluation.plots`).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
-from samba.base import InputError
+from samba.base import InputError, outcomes_in_order
 from samba.body import mirror_poses
 from samba.evaluation import report
 from samba.evaluation.protocol import TakeErrors, capture_take, run_method, summarize
@@ -77,6 +79,7 @@ def evaluate(
     dropout: float = 0.0,
     new_user: bool = False,
     progress: bool | None = False,
+    client: Any = None,
 ) -> Evaluation:
     """Capture every test take once and reconstruct it with every run (label -> method).
 
@@ -86,29 +89,80 @@ def evaluate(
     Test take i is
     captured with seed `seed + i` (`samba.evaluation.protocol.capture_take`, with `dropout` and
     `new_user`). `progress` None shows a progress bar on a terminal only. Raises
-    `InputError` when a database is empty or smaller than a run's K.
+    `InputError` when a database is empty or smaller than a run's K. With a Dask `client`
+    (`samba.base.cluster_client`) each test take is a task on its workers (`evaluate_take`;
+    the training takes reach each worker once): the same errors, the times of the workers.
     """
     train_names = {name for name, _ in train}
     results: dict[str, list[TakeErrors]] = {label: [] for label in runs}
-    bar = tqdm(test, unit="take", disable=None if progress is None else not progress)
-    for number, (name, poses) in enumerate(bar):
-        bar.set_postfix_str(name, refresh=False)
-        database = [p for other, p in train if other != name]
-        if not database:
-            raise InputError("--train", f"no training take is left for test take {name}")
-        indexes = DatabaseIndexes(np.concatenate(database), build_index)
-        take = capture_take(name, poses, seed=seed + number, dropout=dropout, new_user=new_user)
+    tests = [(number, name, poses) for number, (name, poses) in enumerate(test)]
+    task = partial(
+        evaluate_take,
+        runs=runs,
+        build_index=build_index,
+        seed=seed,
+        dropout=dropout,
+        new_user=new_user,
+    )
+    if client is None:
+        outcomes: Iterable[tuple[Any, Any]] = _run_here(task, tests, train, progress)
+    else:
+        outcomes = outcomes_in_order(
+            client, task, tests, (train,), progress, unit="take", name=lambda t: t[1]
+        )
+    for _, outcome in outcomes:
+        if isinstance(outcome, BaseException):
+            raise outcome
+        for label, errors in outcome.items():
+            results[label].append(errors)
+    left_out = tuple(name for name, _ in test if name in train_names)
+    frames = {name: len(poses) for name, poses in test}
+    names = tuple(name for name, _ in train)
+    return Evaluation(results, left_out, frames, names, seed, dropout, new_user)
+
+
+def evaluate_take(
+    test: tuple[int, str, np.ndarray],
+    train: Sequence[NamedPoses],
+    runs: Mapping[str, Method],
+    build_index: IndexBuilder,
+    seed: int = 0,
+    dropout: float = 0.0,
+    new_user: bool = False,
+) -> dict[str, TakeErrors]:
+    """The errors of every run (label -> method) on test take `test` = (number, name,
+    poses (F, 13, 3) m), captured with seed `seed + number`, its database every training
+    take but one of its name (`evaluate`); single-threaded, as the protocol times it."""
+    number, name, poses = test
+    database = [p for other, p in train if other != name]
+    if not database:
+        raise InputError("--train", f"no training take is left for test take {name}")
+    indexes = DatabaseIndexes(np.concatenate(database), build_index)
+    take = capture_take(name, poses, seed=seed + number, dropout=dropout, new_user=new_user)
+    errors = {}
+    with threadpool_limits(limits=1):
         for label, m in runs.items():
             index = indexes.get(m.mirrored_database)
             if m.config.k > len(index):
                 raise InputError(
                     label, f"K = {m.config.k} exceeds the {len(index)} poses of {name}'s database"
                 )
-            results[label].append(run_method(m.build(index), take))
-    left_out = tuple(name for name, _ in test if name in train_names)
-    frames = {name: len(poses) for name, poses in test}
-    names = tuple(name for name, _ in train)
-    return Evaluation(results, left_out, frames, names, seed, dropout, new_user)
+            errors[label] = run_method(m.build(index), take)
+    return errors
+
+
+def _run_here(
+    task: Callable[..., dict[str, TakeErrors]],
+    tests: Sequence[tuple[int, str, np.ndarray]],
+    train: Sequence[NamedPoses],
+    progress: bool | None,
+) -> Iterator[tuple[tuple[int, str, np.ndarray], dict[str, TakeErrors]]]:
+    """(test, `task(test, train)`) for every test take in order, in this process, under a
+    progress bar (None: on a terminal only) naming the take."""
+    bar = tqdm(tests, unit="take", disable=None if progress is None else not progress)
+    for test in bar:
+        bar.set_postfix_str(test[1], refresh=False)
+        yield test, task(test, train)
 
 
 class DatabaseIndexes:
