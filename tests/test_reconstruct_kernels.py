@@ -1,6 +1,7 @@
 """The reconstruction's compiled kernel (`samba.reconstruct.kernels`) agrees with its numpy
-reference: on neighbours whose limbs take the pseudo-poses' fallback axes, and on whole
-takes of every method, live and batched, with missing markers, to 1e-9 m."""
+reference: on neighbours whose limbs take the pseudo-poses' fallback axes, on the local
+regression of a part with lost markers, and on whole takes of every method, live and
+batched, with missing markers, to 1e-9 m."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from samba.base import kernels_enabled
 from samba.body.skeleton import markers_of, mirror_poses, standard_pose
 from samba.db.index import PoseIndex
 from samba.evaluation.protocol import capture_take
+from samba.reconstruct.local_regression import local_regression
 from samba.reconstruct.methods import METHODS
 from samba.synthetic.motions import generate, library
 
@@ -79,7 +81,7 @@ def database() -> np.ndarray:
     return np.concatenate([t.poses for t in library(takes_per_motion=1, seconds=4.0)])
 
 
-@pytest.mark.parametrize("name", ["chai", "samba", "best"])
+@pytest.mark.parametrize("name", ["chai", "samba", "best", "lwr"])
 def test_whole_takes_agree_with_the_numpy_path(
     name: str, database: np.ndarray, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -101,3 +103,21 @@ def test_whole_takes_agree_with_the_numpy_path(
     np.testing.assert_allclose(compiled.poses, reference.poses, atol=TOLERANCE_M, rtol=0)
     np.testing.assert_allclose(stepped, reference.poses, atol=TOLERANCE_M, rtol=0)
     np.testing.assert_array_equal(compiled.confident, reference.confident)
+
+
+@pytest.mark.parametrize("scale_by_tibia", [False, True])
+def test_local_regression_agrees_with_numpy(
+    scale_by_tibia: bool, database: np.ndarray, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # 40 neighbours of three observations, one without its right wrist and a knee.
+    rng = np.random.default_rng(3)
+    neighbours = database[rng.integers(0, len(database), size=(3, 40))].astype(np.float64)
+    markers = markers_of(database[[5, 300, 700]]) + rng.normal(0.0, 0.01, (3, 8, 3))
+    markers[2, [3, 4]] = np.nan
+    distances = np.sort(rng.uniform(0.01, 0.2, size=(3, 40)), axis=1)
+    joints = [3, 4, 7, 8, 0]
+    compiled = local_regression(markers, neighbours, distances, joints, scale_by_tibia, 3e-5)
+    monkeypatch.setenv("SAMBA_KERNELS", "numpy")
+    reference = local_regression(markers, neighbours, distances, joints, scale_by_tibia, 3e-5)
+    assert compiled.shape == (3, 5, 3)
+    np.testing.assert_allclose(compiled, reference, atol=TOLERANCE_M, rtol=0)

@@ -7,8 +7,10 @@ alignment of both into the canonical frame (`samba.body.Alignment`), the pseudo-
 (`pseudo_poses`), the samples' kernel weights (`Reconstructor.sample_weights`), the local
 pose space (`LocalPoseSpace.from_samples`), the energy's affine minimiser
 (`affine_solution`) and its turn back to the world frame. `part_estimates_kernel` does
-the same for `part_retrieval.part_estimate` after its index query (the neighbours aligned
-by the part's markers, their kernel-weighted mean, turned back). The numpy functions stay
+the same for `part_retrieval.neighbour_mean` after its index query (the neighbours aligned
+by the part's markers, their kernel-weighted mean, turned back), and
+`part_regressions_kernel` for `local_regression.local_regression_numpy` (the same neighbours'
+locally weighted linear regression, read at the observation). The numpy functions stay
 the references; `tests/test_reconstruct_kernels.py` checks that both paths give the same
 poses (1e-9 m).
 
@@ -134,7 +136,7 @@ def local_solutions_kernel(
 def part_estimates_kernel(
     markers: np.ndarray, neighbours: np.ndarray, distances: np.ndarray, scale_by_tibia: bool
 ) -> np.ndarray:
-    """`part_retrieval.part_estimate` after its query: poses (b, 13, 3) world meters, the
+    """`part_retrieval.neighbour_mean`: poses (b, 13, 3) world meters, the
     kernel-weighted mean of the neighbours (b, K, 13, 3) world meters at feature distances
     (b, K), each aligned by the markers (b, 8, 3) present (NaN = missing), turned back by
     the observation's alignment."""
@@ -160,6 +162,78 @@ def part_estimates_kernel(
         mean /= total
         alignment_of(markers[f], present, scale_by_tibia, origin, turn)
         invert_alignment(mean, origin, turn, out[f])
+    return out
+
+
+@compiled
+def part_regressions_kernel(
+    markers: np.ndarray,
+    neighbours: np.ndarray,
+    distances: np.ndarray,
+    joints: np.ndarray,
+    scale_by_tibia: bool,
+    ridge: float,
+    width: float,
+) -> np.ndarray:
+    """`local_regression.local_regression_numpy`: the `joints` (J,) of markers (b, 8, 3) world
+    meters (NaN = missing) by a locally weighted linear regression over their neighbours
+    (b, K, 13, 3) world meters at feature distances (b, K), kernel `width` times the
+    nearest distance, `ridge` (m^2) on the slopes; returns (b, J, 3) world meters. Only
+    the markers present enter the design, which gives the numpy reference's solution."""
+    b, k = neighbours.shape[0], neighbours.shape[1]
+    outputs = 3 * joints.shape[0]
+    out = np.empty((b, joints.shape[0], 3))
+    present = np.empty(N_MARKERS, dtype=np.bool_)
+    origin = np.empty(3)
+    turn = np.empty(4)
+    neighbour_origin = np.empty(3)
+    neighbour_turn = np.empty(4)
+    observed = np.empty((N_MARKERS, 3))
+    aligned = np.empty((N_JOINTS, 3))
+    row = np.empty(1 + 3 * N_MARKERS)
+    estimate = np.empty((joints.shape[0], 3))
+    for f in range(b):
+        dims = 1
+        for i in range(N_MARKERS):
+            present[i] = not np.isnan(markers[f, i, 0] + markers[f, i, 1] + markers[f, i, 2])
+            dims += 3 if present[i] else 0
+        alignment_of(markers[f], present, scale_by_tibia, origin, turn)
+        apply_alignment(markers[f], origin, turn, observed)
+        normal = np.zeros((dims, dims))
+        rhs = np.zeros((dims, outputs))
+        nearest = width * max(distances[f, 0], 1e-3)
+        total = 0.0
+        for j in range(k):
+            total += np.exp(-((distances[f, j] / nearest) ** 2))
+        for j in range(k):
+            weight = np.exp(-((distances[f, j] / nearest) ** 2)) / total
+            seen = neighbours[f, j][_MARKER_JOINTS]
+            alignment_of(seen, present, scale_by_tibia, neighbour_origin, neighbour_turn)
+            apply_alignment(neighbours[f, j], neighbour_origin, neighbour_turn, aligned)
+            row[0] = 1.0
+            d = 1
+            for i in range(N_MARKERS):
+                if present[i]:
+                    for c in range(3):
+                        row[d] = aligned[_MARKER_JOINTS[i], c] - observed[i, c]
+                        d += 1
+            for p in range(dims):
+                weighted = weight * row[p]
+                for q in range(p, dims):
+                    normal[p, q] += weighted * row[q]
+                for o in range(joints.shape[0]):
+                    for c in range(3):
+                        rhs[p, 3 * o + c] += weighted * aligned[joints[o], c]
+        for p in range(dims):
+            for q in range(p):
+                normal[p, q] = normal[q, p]
+            if p > 0:
+                normal[p, p] += ridge
+        solution = np.linalg.solve(normal, rhs)
+        for o in range(joints.shape[0]):
+            for c in range(3):
+                estimate[o, c] = solution[0, 3 * o + c]
+        invert_alignment(estimate, origin, turn, out[f])
     return out
 
 
@@ -401,10 +475,19 @@ def _example_parts() -> np.ndarray:
     return part_estimates_kernel(markers, neighbours, np.zeros((1, 2)), False)
 
 
+def _example_regressions() -> np.ndarray:
+    """Compile `part_regressions_kernel` for the reconstruction's argument types."""
+    pose = standard_pose()
+    markers = np.ascontiguousarray(pose[list(MARKER_JOINTS)][None])
+    neighbours = np.ascontiguousarray(np.repeat(pose[None, None], 2, axis=1))
+    joints = np.zeros(1, dtype=np.int64)
+    return part_regressions_kernel(markers, neighbours, np.zeros((1, 2)), joints, False, 1.0, 2.0)
+
+
 KERNELS = KernelSet(
     "reconstruction",
-    (local_solutions_kernel, part_estimates_kernel),
-    (_example, _example_parts),
+    (local_solutions_kernel, part_estimates_kernel, part_regressions_kernel),
+    (_example, _example_parts, _example_regressions),
     estimate_s=20.0,
 )
 """The reconstruction's kernels, warmed by every `Reconstructor` (`KernelSet.warm_up`)."""

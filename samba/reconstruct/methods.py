@@ -6,6 +6,7 @@
 | `chai` | local PCA of the K = 10 neighbours, no pseudo-poses (Chai & Hodgins 2005) |
 | `samba` | the paper: K = 10, N = 10 pseudo-poses, local PCA, prior + marker + smoothness |
 | `best` | our best configuration (see `BEST`) |
+| `lwr` | `best` with each part's joints by a local linear regression (see `LWR`) |
 """
 
 from __future__ import annotations
@@ -37,6 +38,12 @@ BEST = ReconstructionConfig(
 )
 """Our best configuration, chosen by leave-one-take-out evaluation
 (docs/design/reconstruction.md)."""
+LWR = replace(BEST, part_k=128, part_ridge=3e-5)
+"""`best` with the elbows, hips and head of each frame by a locally weighted linear
+regression on each part's markers over its 200 nearest poses (issue 44;
+`samba.reconstruct.local_regression`). K of 64, 128 and 200 and ridges of 1e-5 to 1e-4
+m^2 tried leave-one-take-out over the takes outside the validation split of
+`bench/eval_cmu.sh`."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +77,7 @@ METHODS: dict[str, Method] = {
     "chai": Method("chai", "local PCA of K = 10 neighbours, no pseudo-poses", replace(PAPER, n=1)),
     "samba": Method("samba", "the paper: K = 10, N = 10 pseudo-poses, local PCA", PAPER),
     "best": Method("best", "our best configuration", BEST, mirrored_database=True),
+    "lwr": Method("lwr", "best, parts by local linear regression", LWR, mirrored_database=True),
 }
 """Every method `samba eval` knows, by name."""
 

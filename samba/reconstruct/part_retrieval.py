@@ -8,18 +8,20 @@ shoulders and its wrist; the hips: all but the wrists; the head: shoulders and k
 aligns the neighbours by those markers, and takes their kernel-weighted mean of the
 part's joints. The estimate is blended into the main one with the part's weight.
 Measured with `samba eval` (docs/reconstruction.md): elbows 7-8 cm -> 5.5 cm, hips
-4.2 -> 3.5 cm, head 2.3 -> 2.1 cm.
+4.2 -> 3.5 cm, head 2.3 -> 2.1 cm. With a ridge the part's estimate is instead a locally
+weighted linear regression on its markers over the same neighbours
+(`samba.reconstruct.local_regression`), blended with `REGRESSION_PARTS`' weights.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from samba.base import kernels_enabled
 from samba.body import N_JOINTS, N_MARKERS, Alignment, has_heading, markers_of
+from samba.reconstruct.local_regression import local_regression
 from samba.reconstruct.neighbours import NeighbourSource
 
 
@@ -40,6 +42,11 @@ PARTS: tuple[Part, ...] = (
     Part((0,), (0, 1, 4, 5), 0.4),  # head: shoulders, knees
 )
 """The parts `best` uses; masks and weights chosen on a validation third of the CMU takes."""
+REGRESSION_PARTS: tuple[Part, ...] = tuple(replace(part, weight=0.7) for part in PARTS)
+"""The parts of the regression (`lwr`): the same masks (regressions on both wrists for the
+elbows, on every marker for the hips, or on shoulders, wrists and knees for the head, came
+out 0.1-0.3 cm worse), each blended at 0.7 (0.6-0.9 tried), chosen leave-one-take-out
+over the takes outside the validation split (issue 44)."""
 
 
 def refine_with_parts(
@@ -48,57 +55,78 @@ def refine_with_parts(
     poses: np.ndarray,
     k: int,
     eps: float = 0.0,
-    parts: Sequence[Part] = PARTS,
+    ridge: float = 0.0,
 ) -> np.ndarray:
     """Poses (b, 13, 3) with each part's joints blended towards its own estimate.
 
     `markers` (b, 8, 3) world meters (NaN = missing); `k` neighbours per part, `eps` the
-    index query's approximation. A frame whose part markers lack a complete left/right
-    pair keeps the main estimate for that part.
+    index query's approximation (every part in one query). `ridge` 0 takes the
+    neighbours' kernel-weighted mean (`PARTS`), > 0 (m^2) their local linear regression
+    with that ridge (`REGRESSION_PARTS`). A frame whose part markers lack a complete
+    left/right pair keeps the main estimate for that part.
     """
+    parts = REGRESSION_PARTS if ridge else PARTS
     out = np.array(poses, dtype=np.float64)
-    for part in parts:
-        keep = np.zeros(N_MARKERS, dtype=bool)
-        keep[list(part.markers)] = True
-        masked = np.where(keep[:, None], markers, np.nan)
-        present = ~np.isnan(masked).any(axis=-1)
-        ok = has_heading(present) & (present.sum(axis=1) >= 3)
-        if not ok.any():
-            continue
-        estimate = part_estimate(source, masked[ok], k, eps)
+    keep = np.zeros((len(parts), 1, N_MARKERS, 1), dtype=bool)
+    for row, part in enumerate(parts):
+        keep[row, 0, list(part.markers)] = True
+    masked = np.where(keep, markers[None], np.nan)  # (parts, b, 8, 3)
+    present = ~np.isnan(masked).any(axis=-1)
+    ok = has_heading(present.reshape(-1, N_MARKERS)).reshape(len(parts), -1)
+    ok &= present.sum(axis=-1) >= 3
+    if not ok.any():
+        return out
+    queried = masked[ok]
+    distances, rows = source.query(queried, k=k, eps=eps)
+    neighbours = np.asarray(source.poses[rows.reshape(-1)], dtype=np.float64)
+    neighbours = neighbours.reshape(len(queried), k, N_JOINTS, 3)
+    scale = bool(source.scale_by_tibia)
+    ends = np.cumsum(ok.sum(axis=1))
+    for part, chosen, end in zip(parts, ok, ends, strict=True):
+        frames = slice(end - chosen.sum(), end)
         joints = list(part.joints)
-        blended = (1.0 - part.weight) * out[ok][:, joints] + part.weight * estimate[:, joints]
-        rows = np.flatnonzero(ok)
+        if ridge:
+            estimate = local_regression(
+                queried[frames], neighbours[frames], distances[frames], joints, scale, ridge
+            )
+        else:
+            estimate = neighbour_mean(
+                queried[frames], neighbours[frames], distances[frames], scale
+            )[:, joints]
+        rows = np.flatnonzero(chosen)
+        blended = (1.0 - part.weight) * out[rows][:, joints] + part.weight * estimate
         out[rows[:, None], joints] = blended
     return out
 
 
-def part_estimate(
-    source: NeighbourSource, markers: np.ndarray, k: int, eps: float = 0.0
+def neighbour_mean(
+    markers: np.ndarray, neighbours: np.ndarray, distances: np.ndarray, scale_by_tibia: bool
 ) -> np.ndarray:
-    """Kernel-weighted mean pose (b, 13, 3), world meters, of the k poses nearest to
-    markers (b, 8, 3) over the markers present, each aligned by those markers.
+    """Kernel-weighted mean pose (b, 13, 3), world meters, of the neighbours
+    (b, K, 13, 3) world meters of markers (b, 8, 3) (world meters, NaN = missing) at
+    feature distances (b, K) meters, each aligned by the markers present.
 
     The weight of a neighbour at feature distance d is exp(-(d / d1)^2), d1 the nearest
-    one's distance (at least 1 mm): close matches count, far ones fade. After the query,
-    by the compiled kernel (`samba.reconstruct.kernels.part_estimates_kernel`) unless
-    `kernels_enabled()` says numpy.
+    one's distance (at least 1 mm): close matches count, far ones fade. By the compiled
+    kernel (`samba.reconstruct.kernels.part_estimates_kernel`) unless `kernels_enabled()`
+    says numpy.
     """
-    scale = source.scale_by_tibia
-    distances, rows = source.query(markers, k=k, eps=eps)
-    poses = np.asarray(source.poses[rows.reshape(-1)], dtype=np.float64)
     if kernels_enabled():
         import samba.reconstruct.kernels as kernels  # numba only when a kernel runs
 
-        neighbours = poses.reshape(len(markers), k, N_JOINTS, 3)
         return kernels.part_estimates_kernel(
-            np.ascontiguousarray(markers), neighbours, distances, bool(scale)
+            np.ascontiguousarray(markers),
+            np.ascontiguousarray(neighbours),
+            np.ascontiguousarray(distances),
+            scale_by_tibia,
         )
-    seen = markers_of(poses.reshape(len(markers), k, N_JOINTS, 3))
-    seen = np.where(np.isnan(markers)[:, None], np.nan, seen).reshape(-1, N_MARKERS, 3)
-    aligned = Alignment.from_markers(seen, scale_by_tibia=scale).apply(poses)
-    aligned = aligned.reshape(len(markers), k, N_JOINTS, 3)
+    b, k = distances.shape
+    seen = np.where(np.isnan(markers)[:, None], np.nan, markers_of(neighbours))
+    aligned = Alignment.from_markers(seen.reshape(-1, N_MARKERS, 3), scale_by_tibia).apply(
+        neighbours.reshape(-1, N_JOINTS, 3)
+    )
+    aligned = aligned.reshape(b, k, N_JOINTS, 3)
     nearest = np.maximum(distances[:, :1], 1e-3)
     weights = np.exp(-((distances / nearest) ** 2))
     mean = np.einsum("bk,bkjc->bjc", weights / weights.sum(axis=1, keepdims=True), aligned)
-    return Alignment.from_markers(markers, scale_by_tibia=scale).invert(mean)
+    return Alignment.from_markers(markers, scale_by_tibia=scale_by_tibia).invert(mean)

@@ -69,7 +69,10 @@ class ReconstructionConfig:
     residual is at most `confident_residual` meters with at least 6 markers. `seed` fixes
     the pseudo-pose noise table; `eps` is passed to the index query (0 = exact).
     `part_k` > 0 re-estimates elbows, hips and head from their own `part_k` nearest poses
-    (`samba.reconstruct.part_retrieval`); 0 keeps the paper's single retrieval. `missing_sigma` > 0
+    (`samba.reconstruct.part_retrieval`); 0 keeps the paper's single retrieval. `part_ridge`
+    > 0 (m^2) makes each part's estimate a locally weighted linear regression on its
+    markers with that ridge on the slopes (`samba.reconstruct.local_regression`); 0 the
+    neighbours' kernel-weighted mean. `missing_sigma` > 0
     (meters) holds the joint of a missing marker to its motion prediction with weight
     1 / missing_sigma^2 on top of the smoothness term; 0 leaves it to the pose space.
     `shoulder_origin` places the observation and its neighbours by their shoulder
@@ -92,6 +95,7 @@ class ReconstructionConfig:
     seed: int = 0
     eps: float = 0.0
     part_k: int = 0
+    part_ridge: float = 0.0
     missing_sigma: float = 0.0
     bandwidth: float = 0.0
     min_bandwidth: float = 0.005
@@ -105,6 +109,8 @@ class ReconstructionConfig:
             raise ValueError(f"variance_kept must be in (0, 1], got {self.variance_kept}")
         if self.marker_sigma <= 0 or self.smooth_sigma <= 0:
             raise ValueError("marker_sigma and smooth_sigma must be positive")
+        if self.part_ridge < 0:
+            raise ValueError(f"part_ridge must be >= 0, got {self.part_ridge}")
         if self.hold_frames < 0:
             raise ValueError(f"hold_frames must be >= 0, got {self.hold_frames}")
 
@@ -213,7 +219,9 @@ class Reconstructor:
             self.source.query(markers[1:], k=1, eps=self.config.eps)
         if self.config.part_k:
             poses = np.repeat(standard_pose()[None], len(markers), axis=0)
-            refine_with_parts(self.source, markers, poses, 1, self.config.eps)
+            refine_with_parts(
+                self.source, markers, poses, 1, self.config.eps, self.config.part_ridge
+            )
         return len(markers) - 1
 
     def reset(self) -> None:
@@ -473,7 +481,9 @@ def _reconstruct(
         # Missing markers are filled with the main estimate, so every part is queried.
         seen = solved_markers[frames]
         filled = np.where(np.isnan(seen), markers_of(poses[frames]), seen)
-        poses[frames] = refine_with_parts(model.source, filled, poses[frames], cfg.part_k, cfg.eps)
+        poses[frames] = refine_with_parts(
+            model.source, filled, poses[frames], cfg.part_k, cfg.eps, cfg.part_ridge
+        )
     diff = np.where(observed[..., None], markers_of(poses) - markers, 0.0)
     squared = np.einsum("fmc,fmc->fm", diff, diff)
     used = np.where(usable, observed.sum(axis=1), 0)
