@@ -20,7 +20,8 @@ Frames come from a feed, each frame a `Capture` with its capture time:
   (`samba.markers.render`). Its frames are captured on a wall-clock grid, frame i at
   `start_at + i / fps`, and stamped with exactly that time, so that nodes of the same rig
   started separately with the same motion, seed and start time film the same subject at
-  the same instants.
+  the same instants (no start time: `START_DELAY_SECONDS` after the node asks for its
+  first frame, when its start-up is done).
 
 `run_node` drives a `CameraNode` with a feed and a `PacketSender` until the feed ends or
 Ctrl-C, and returns a `NodeSummary`. Timestamps are UNIX seconds (`time.time`).
@@ -66,6 +67,9 @@ RENDER_CHUNK_FRAMES = 4
 real-time feed by more than a frame interval (about 20 ms at 640x480)."""
 STATUS_SECONDS = 5.0
 """Interval of the status lines `run_node` prints when asked."""
+START_DELAY_SECONDS = 0.5
+"""How far ahead of the first frame's request a wall-clock grid starts when no start time
+is given."""
 
 _SEQUENCE_MODULUS = 2**32
 
@@ -360,11 +364,12 @@ class SyntheticFeed:
 
     `camera` films `lead_in` (`synthetic_lead_in`, or a marker take's
     `samba.service.marker_motion.MarkerMotion.lead_in`) at `fps`; frame i (counted over
-    repetitions when looping) is captured at `start_at + i / fps` UNIX seconds and
-    stamped with exactly that time. With `pace` the feed sleeps until then; without it
-    frames come as fast as they render. Noise derives from `seed` and `camera_id`, so
-    every run renders the same frames. Before the subject steps in the camera films
-    the empty stage: `mask` holds what is bright there (`static_mask`).
+    repetitions when looping) is captured at `start_at + i / fps` UNIX seconds (None:
+    see `grid_captures`) and stamped with exactly that time. With `pace` the feed
+    sleeps until then; without it frames come as fast as they render. Noise derives
+    from `seed` and `camera_id`, so every run renders the same frames. Before the
+    subject steps in the camera films the empty stage: `mask` holds what is bright
+    there (`static_mask`).
     """
 
     def __init__(
@@ -374,7 +379,7 @@ class SyntheticFeed:
         lead_in: LeadIn,
         fps: float,
         seed: int,
-        start_at: float,
+        start_at: float | None,
         pace: bool = True,
         loop: bool = False,
         options: RenderOptions | None = None,
@@ -404,7 +409,7 @@ class SyntheticFeed:
 def grid_captures(
     frames: Callable[[], Iterable[np.ndarray]],
     fps: float,
-    start_at: float,
+    start_at: float | None,
     pace: bool,
     loop: bool,
     name: str,
@@ -412,8 +417,13 @@ def grid_captures(
     """Captures of the frames of `frames()` on a wall-clock grid: frame i (counted over
     repetitions when looping) is captured at `start_at + i / fps` UNIX seconds and
     stamped with exactly that time; with `pace` it waits until then, and its deadline is
-    the next grid time. `frames()` is called again for every repetition."""
+    the next grid time. `start_at` None starts the grid `START_DELAY_SECONDS` after the
+    first capture is asked for, so that whatever the node did before (loading, opening,
+    rendering the empty stage) does not make its first frames late. `frames()` is called
+    again for every repetition."""
     period = 1.0 / fps
+    if start_at is None:
+        start_at = time.time() + START_DELAY_SECONDS
     index = 0
     while True:
         for number, frame in enumerate(frames()):
@@ -431,10 +441,12 @@ def grid_captures(
 class NodeSummary:
     """What a node run did: `frames` sent (or attempted), `missing_rate` the fraction of
     (frame, marker) reported missing, `send_errors` packets that could not be sent,
-    `late_frames` frames whose packet went out after their deadline (of `paced_frames`
-    that had one), `seconds` of wall time, `process_ms` mean detection + tracking time
-    per frame, `interrupted` whether Ctrl-C ended it, `missing_what` what the missing
-    rate counts, for people."""
+    `late_frames` frames whose packet went out after their deadline once the node had
+    kept one (of `paced_frames` that had one), `startup_frames` the late frames before
+    the first on time (the node's start-up: a grid started before it was ready, the
+    first frame's compiling), `seconds` of wall time, `process_ms` mean detection +
+    tracking time per frame, `interrupted` whether Ctrl-C ended it, `missing_what` what
+    the missing rate counts, for people."""
 
     camera: int
     frames: int
@@ -446,19 +458,27 @@ class NodeSummary:
     process_ms: float
     interrupted: bool
     missing_what: str = "markers missing"
+    startup_frames: int = 0
 
     @property
     def kept_up(self) -> bool:
-        """Whether every frame with a deadline was sent in time."""
+        """Whether every frame with a deadline after the start-up was sent in time."""
         return self.late_frames == 0
 
     def describe(self) -> str:
         """One line for people."""
         if self.paced_frames:
+            on_time = self.paced_frames - self.late_frames - self.startup_frames
+            starting = (
+                f", the first {self.startup_frames} late while the node started"
+                if self.startup_frames
+                else ""
+            )
             pace = (
-                f"kept up with real time ({self.paced_frames} frames on time)"
+                f"kept up with real time ({on_time} frames on time{starting})"
                 if self.kept_up
-                else f"fell behind real time: {self.late_frames} of {self.paced_frames} frames late"
+                else f"fell behind real time: {self.late_frames} of {self.paced_frames} frames "
+                f"late{starting}"
             )
         else:
             pace = "not paced"
@@ -517,7 +537,7 @@ class _Tally:
         self.sender = sender
         self.missing_what = missing_what
         self.began = time.monotonic()
-        self.frames = self.missing = self.late = self.paced = 0
+        self.frames = self.missing = self.late = self.paced = self.startup = 0
         self.process_s = 0.0
         self._mark = (self.began, 0, 0)
         """Clock, frames and send errors at the last status line (or the first frame)."""
@@ -530,8 +550,13 @@ class _Tally:
         self.frames += 1
         self.missing += N_MARKERS if values is None else int(np.isnan(values[:, 0]).sum())
         if deadline is not None:
+            late = time.time() > deadline
+            starting = self.paced == self.startup  # no frame on time yet
             self.paced += 1
-            self.late += time.time() > deadline
+            if late and starting:
+                self.startup += 1
+            else:
+                self.late += late
 
     def status_due(self) -> bool:
         """Whether `STATUS_SECONDS` have passed since the last status line."""
@@ -562,6 +587,7 @@ class _Tally:
             process_ms=1000.0 * self.process_s / self.frames if self.frames else math.nan,
             interrupted=interrupted,
             missing_what=self.missing_what,
+            startup_frames=self.startup,
         )
 
 

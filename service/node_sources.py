@@ -4,14 +4,13 @@ with a shape tree a markerless pose), for `samba node`.
 
 A synthetic source films a built-in motion, or the real markers of a C3D file
 (`samba.service.marker_motion`), after its standing lead-in on a wall-clock grid starting
-at `start_at` (default: `START_DELAY_SECONDS` from now), so that nodes of one rig started
-separately film the same instants.
+at `start_at` (default: `samba.service.node.START_DELAY_SECONDS` after the node is ready),
+so that nodes of one rig started separately film the same instants.
 """
 
 from __future__ import annotations
 
 import itertools
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -34,8 +33,6 @@ from samba.service.node import (
 from samba.service.silhouette_node import SilhouetteNode, SyntheticStageFeed
 from samba.silhouette import ShapeTree, SilhouetteExtractor
 
-START_DELAY_SECONDS = 0.5
-"""How far ahead of now the synthetic capture starts when `start_at` is not given."""
 DEFAULT_SYNTHETIC_SECONDS = 10.0
 """Length of the synthetic motion (after the 1-s standing lead-in) by default; a marker
 file plays whole by default."""
@@ -69,11 +66,6 @@ class NodeSource:
         """The synthetic rig's frame rate."""
         return self.fps or DEFAULT_FPS
 
-    @property
-    def synthetic_start(self) -> float:
-        """When the synthetic capture's first frame is taken, UNIX seconds."""
-        return self.start_at if self.start_at is not None else time.time() + START_DELAY_SECONDS
-
     def file_captures(self, checked: bool = True) -> Iterator[Capture]:
         """The captures of a webcam, a video or an image folder; when `checked`,
         `InputError` naming the path when a video is a folder or an image folder a file."""
@@ -106,7 +98,7 @@ def open_marker_node(
             lead_in,
             fps,
             seed,
-            source.synthetic_start,
+            source.start_at,
             source.pace,
             source.loop,
             options,
@@ -155,7 +147,7 @@ def open_silhouette_node(
             source.seconds or DEFAULT_SYNTHETIC_SECONDS,
             source.synthetic_fps,
             source.seed or 0,
-            source.synthetic_start,
+            source.start_at,
             source.pace,
             source.loop,
         )

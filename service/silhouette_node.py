@@ -90,7 +90,7 @@ class SyntheticStageFeed:
         seconds: float,
         fps: float,
         seed: int,
-        start_at: float,
+        start_at: float | None,
         pace: bool = True,
         loop: bool = False,
     ) -> None:

@@ -8,7 +8,7 @@ import socket
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -24,11 +24,13 @@ from samba.markers.lead_in import LeadIn
 from samba.markers.observation import spread_cameras
 from samba.service.errors import PacketError
 from samba.service.node import (
+    START_DELAY_SECONDS,
     CameraNode,
     Capture,
     PacketSender,
     SubjectStart,
     SyntheticFeed,
+    grid_captures,
     run_node,
     synthetic_lead_in,
 )
@@ -344,3 +346,64 @@ def test_ctrl_c_ends_with_the_summary(
     assert summary.paced_frames == 0 and "interrupted" in summary.describe()
     assert [p.sequence for p in receiver.packets()] == [7, 8, 9, 10, 11]
     assert len(status.getvalue().splitlines()) == 5
+
+
+def test_a_start_time_in_the_past_is_one_line_naming_the_flag(
+    rig: Rig, receiver: Receiver, capsys: pytest.CaptureFixture[str]
+) -> None:
+    past = time.time() - 100.0
+    code, out, err = run(
+        capsys, node(rig, receiver.address, *synthetic(0, "--start-at", str(past)))
+    )
+    assert code == 1 and out == ""
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith(f"samba: error: --start-at {past:.1f}: is 1")
+    assert re.search(r"is 1\d\d\.\d s in the past", err), err
+    assert receiver.datagrams(idle=0.05) == []
+
+
+def with_deadlines(rig: Rig, past: list[bool]) -> list[Capture]:
+    """Unpaced captures of the rig's camera 0 given deadlines: long gone where `past`
+    says so, an hour ahead elsewhere."""
+    feed = SyntheticFeed(rig.cameras[0], 0, rig.lead_in, FPS, SEED, START_AT, pace=False)
+    ahead = time.time() + 3600.0
+    captures = zip(feed.captures(), past, strict=False)
+    return [replace(c, deadline=0.0 if late else ahead) for c, late in captures]
+
+
+@pytest.mark.parametrize(
+    ("past", "startup", "late", "says"),
+    [
+        (
+            [True] * 3 + [False] * 7,
+            3,
+            0,
+            "kept up with real time (7 frames on time, the first 3 late",
+        ),
+        ([False] * 10, 0, 0, "kept up with real time (10 frames on time)"),
+        ([True, False, True] + [False] * 7, 1, 1, "fell behind real time: 1 of 10 frames late"),
+    ],
+)
+def test_frames_late_while_the_node_starts_are_not_falling_behind(
+    rig: Rig, receiver: Receiver, past: list[bool], startup: int, late: int, says: str
+) -> None:
+    node = CameraNode(rig.cameras[0], SubjectStart.of(rig.lead_in))
+    host, port = receiver.address.split(":")
+    with PacketSender(host, int(port), 0) as sender:
+        summary = run_node(node, with_deadlines(rig, past), sender)
+    assert (summary.startup_frames, summary.late_frames, summary.paced_frames) == (
+        startup,
+        late,
+        len(past),
+    )
+    assert summary.kept_up == (late == 0)
+    assert says in summary.describe()
+
+
+def test_a_grid_without_a_start_begins_when_the_first_frame_is_asked_for() -> None:
+    frame = np.zeros((4, 4), np.uint8)
+    captures = grid_captures(lambda: [frame, frame], FPS, None, False, False, "grid")
+    asked = time.time()
+    first, second = captures
+    assert first.timestamp >= asked + START_DELAY_SECONDS
+    assert second.timestamp == first.timestamp + 1.0 / FPS

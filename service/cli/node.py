@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
+import time
 
 import numpy as np
 
@@ -28,11 +29,17 @@ from samba.db.cli import chosen_body, chosen_home
 from samba.ingest import MarkerSet
 from samba.ingest.cli import add_marker_set_argument
 from samba.service.marker_motion import is_marker_file
-from samba.service.node import DEFAULT_FPS, DEFAULT_PORT, PacketSender, SubjectStart, run_node
+from samba.service.node import (
+    DEFAULT_FPS,
+    DEFAULT_PORT,
+    START_DELAY_SECONDS,
+    PacketSender,
+    SubjectStart,
+    run_node,
+)
 from samba.service.node_sources import (
     DEFAULT_SYNTHETIC_SECONDS,
     SOURCES,
-    START_DELAY_SECONDS,
     NodeSource,
     open_marker_node,
     open_silhouette_node,
@@ -156,9 +163,10 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--start-at",
         type=finite_float,
         metavar="T",
-        help="UNIX time of frame 0; frame i is captured at T + i / fps (default: now + "
-        f"{START_DELAY_SECONDS:g} s). Nodes given the same motion, seed and T film the "
-        "same instants",
+        help="UNIX time of frame 0, in the future unless --no-pace; frame i is captured at "
+        f"T + i / fps (default: {START_DELAY_SECONDS:g} s after the node is ready). Nodes "
+        "given the same motion, seed and T film the same instants, e.g. T=$(( $(date +%%s) "
+        "+ 5 ))",
     )
     add_marker_set_argument(synthetic)
     subject = parser.add_argument_group(
@@ -238,6 +246,8 @@ def run(args: argparse.Namespace) -> int:
     """Open the node on its one source and send a packet per frame to `--server` until the
     source ends (or Ctrl-C); print the run's summary."""
     kind = _source_of(args)
+    if args.start_at is not None and not args.no_pace:
+        _check_ahead(args.start_at, time.time())
     cameras = read_calibration(args.calib)
     if args.camera >= len(cameras):
         raise InputError(
@@ -313,6 +323,17 @@ def _source_of(args: argparse.Namespace) -> str:
         if source != "synthetic" and (args.background is None) == (args.empty_frames is None):
             raise InputError("--mode silhouette", "give --background PATH or --empty-frames N")
     return source
+
+
+def _check_ahead(start_at: float, now: float) -> None:
+    """InputError naming `--start-at` when `start_at` (UNIX seconds) is before `now`: every
+    frame of a paced capture would be late."""
+    if start_at < now:
+        raise InputError(
+            f"--start-at {start_at:.1f}",
+            f"is {now - start_at:,.1f} s in the past (every frame would be late); give a time "
+            "ahead of the clock, e.g. T=$(( $(date +%s) + 5 ))",
+        )
 
 
 def _synthetic_motion(text: str) -> str:
