@@ -22,6 +22,9 @@ SUFFIXES = (".bvh", ".mcap")
 """Files picked up in named folders: BVH and takes recorded by the live service."""
 FileReader = Callable[[Path, BvhImportOptions | None], Take]
 """Reads one motion file as a checked take, raising what is wrong (`read_file`)."""
+FILES_PER_TASK = 8
+"""Most files one Dask task reads: a file takes tens of milliseconds to read, about ten
+times what the scheduler spends on a task."""
 COMMIT_FILES = 64
 """Most files whose takes `import_paths` commits together."""
 COMMIT_SECONDS = 1.0
@@ -213,7 +216,9 @@ def _readings(
     one after the other, or with a Dask `client` on its workers."""
     if client is not None:
         task = partial(read, options=options)
-        yield from outcomes_in_order(client, task, files, progress=progress, unit="file")
+        yield from outcomes_in_order(
+            client, task, files, progress=progress, unit="file", most_per_task=FILES_PER_TASK
+        )
         return
     bar = tqdm(files, unit="file", disable=None if progress is None else not progress)
     for path in bar:

@@ -68,10 +68,12 @@ def test_cluster_import_stores_what_a_serial_import_stores(
     assert PoseStore.open(tmp_path / "cluster").verify().ok
 
 
+@pytest.mark.slow
 def test_a_worker_killed_mid_import_leaves_a_sound_store_and_the_file_reported(
-    client: Any, small_files: list[Path], tmp_path: Path
+    client: Any, small_files: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    always, once = small_files[1].name, small_files[3].name
+    monkeypatch.setattr(cluster_module, "TASKS_PER_WORKER", 1)  # files 2 by 2 in a task
+    always, once = small_files[1].name, small_files[3].name  # each in a task with another
     read = partial(read_or_die, always=always, once=once, marks=tmp_path)
     store = PoseStore.create(tmp_path / "store")
     results = import_paths(store, small_files, progress=False, client=client, read=read)
@@ -79,6 +81,7 @@ def test_a_worker_killed_mid_import_leaves_a_sound_store_and_the_file_reported(
     assert status[always].status == "failed"
     assert "died each time it was tried" in status[always].error
     assert status[once].status == "added"  # retried on another worker
+    assert status[small_files[0].name].status == "added"  # in the killer's task, read alone
     assert (tmp_path / once).exists()  # it did die once
     assert [r.status for r in results].count("added") == len(small_files) - 1
     reopened = PoseStore.open(tmp_path / "store")

@@ -20,6 +20,8 @@ from samba.base.errors import InputError, SambaError
 
 INSTALL_HINT = "pip install 'samba-mocap[cluster]'"
 """What installs Dask distributed beside Samba (on the client and on every worker)."""
+TASKS_PER_WORKER = 4
+"""Fewest tasks per worker `outcomes_in_order` makes of a list of items (for balance)."""
 CONNECT_SECONDS = 10.0
 """How long `cluster_client` waits for a scheduler to answer."""
 SCHEDULER_SETTINGS = {
@@ -100,45 +102,90 @@ def outcomes_in_order(
     progress: bool | None = None,
     unit: str = "item",
     name: Callable[[Any], str] = str,
+    most_per_task: int = 1,
 ) -> Iterator[tuple[Any, Any]]:
-    """Run `task(item, *shared)` on the cluster of `client` for every item, one task each;
-    yield (item, outcome) in the order of `items`, the outcome being what the task
-    returned or the exception it raised (`WorkerDeathError` naming the item by `name`
-    when the workers running it died). Each of `shared` is sent to every worker once,
-    not once per task: it is a task of its own whose outcome workers copy from each other
-    (and that is run again if every copy is lost with its worker). The progress bar
-    (None: on a terminal only) counts tasks as they finish, in any order."""
+    """Run `task(item, *shared)` on the cluster of `client` for every item; yield (item,
+    outcome) in the order of `items`, the outcome being what `task` returned or the
+    exception it raised (`WorkerDeathError` naming the item by `name` when the workers
+    running it died).
+
+    Consecutive items go together in tasks of up to `most_per_task` (fewer when the
+    workers would get less than `TASKS_PER_WORKER` tasks each): short items pay the
+    scheduler's cost per task once per group. A group whose workers died is run again
+    item by item, so that only the item that kills its worker fails. Each of `shared` is
+    sent to every worker once, not once per task: it is a task of its own whose outcome
+    workers copy from each other (run again if every copy is lost with its worker). The
+    progress bar (None: on a terminal only) counts items as their tasks finish, in any
+    order."""
     import dask
-    from distributed import KilledWorker, as_completed
+    from distributed import as_completed
     from tqdm import tqdm
 
     with dask.config.set({"distributed.admin.large-graph-warning-threshold": "1TB"}):
         sent = [client.submit(_itself, value, pure=False) for value in shared]
-    futures = [client.submit(task, item, *sent, pure=False) for item in items]
-    place = {future.key: i for i, future in enumerate(futures)}
+
+    def submit(places: list[int]) -> Any:
+        group = [items[i] for i in places]
+        future = client.submit(_run_group, task, group, *sent, pure=False)
+        pending[future] = places
+        return future
+
+    workers = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
+    size = max(1, min(most_per_task, len(items) // (TASKS_PER_WORKER * workers)))
+    pending: dict[Any, list[int]] = {}
+    running = as_completed(
+        [submit(list(range(i, min(i + size, len(items))))) for i in range(0, len(items), size)]
+    )
     finished: dict[int, Any] = {}
     following = 0
-    bar = tqdm(total=len(futures), unit=unit, disable=None if progress is None else not progress)
+    bar = tqdm(total=len(items), unit=unit, disable=None if progress is None else not progress)
     try:
-        for future in as_completed(futures):
-            bar.update()
-            finished[place[future.key]] = future
+        for future in running:
+            places = pending.pop(future)
+            outcomes = _group_outcomes(future, len(places))
+            if outcomes is None and len(places) > 1:
+                for i in places:
+                    running.add(submit([i]))
+                continue
+            if outcomes is None:
+                problem = "the worker running it died each time it was tried"
+                outcomes = [WorkerDeathError(f"{name(items[places[0]])}: {problem}")]
+            bar.update(len(places))
+            finished.update(zip(places, outcomes, strict=True))
             while following in finished:
-                done = finished.pop(following)
-                try:  # waits while a result lost with its worker is computed again
-                    outcome = done.result()
-                except Exception as exc:
-                    outcome = exc
-                done.release()
-                if isinstance(outcome, KilledWorker):
-                    item = items[following]
-                    problem = "the worker running it died each time it was tried"
-                    outcome = WorkerDeathError(f"{name(item)}: {problem}")
-                yield items[following], outcome
+                yield items[following], finished.pop(following)
                 following += 1
     finally:
         bar.close()
-        client.cancel([f for f in futures if not f.done()])
+        client.cancel(list(pending))
+
+
+def _run_group(task: Callable[..., Any], group: Sequence[Any], *shared: Any) -> list[Any]:
+    """`task(item, *shared)` for every item of `group`: what it returned or raised."""
+    outcomes = []
+    for item in group:
+        try:
+            outcomes.append(task(item, *shared))
+        except Exception as exc:
+            outcomes.append(exc)
+    return outcomes
+
+
+def _group_outcomes(future: Any, count: int) -> list[Any] | None:
+    """The outcomes of the `count` items of a finished group task; None when the workers
+    running it died (Dask's `KilledWorker`); the task's own error for each item when it
+    failed as a whole (its outcomes could not be sent back, say)."""
+    from distributed import KilledWorker
+
+    try:  # waits while a result lost with its worker is computed again
+        outcomes = future.result()
+    except KilledWorker:
+        return None
+    except Exception as exc:
+        return [exc] * count
+    finally:
+        future.release()
+    return list(outcomes)
 
 
 def _itself(value: Any) -> Any:
