@@ -28,6 +28,12 @@ from samba.service.synthetic_capture import SyntheticCapture
 ROOT = Path(__file__).resolve().parents[1]
 
 
+WAIT_MS = 2000.0
+"""How long a test session's frames wait for a late camera (ms). Far above any stall a
+busy machine causes, so tests that count every frame hold beside other work; on
+loopback nothing is lost, so no frame waits that long (a stage's default is 50)."""
+
+
 def config(calibration: Path, store: Path, **changes: object) -> SessionConfig:
     """Session "stage" on `calibration` and `store`, with other keys changed. It keeps
     the nodes' labels: `SyntheticCapture` sends every marker's true label, and the tests

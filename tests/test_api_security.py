@@ -20,7 +20,7 @@ import aiohttp
 import pytest
 from aiohttp import web
 from chromium_page import ChromiumPage, find_chromium
-from live_fixtures import config, free_udp_port
+from live_fixtures import WAIT_MS, config, free_udp_port
 from live_fixtures import until as until_done
 
 from samba.service.serve import LiveServer
@@ -56,6 +56,7 @@ async def answer(response: aiohttp.ClientResponse) -> tuple[int, str]:
     return response.status, body.get("error", "") if isinstance(body, dict) else ""
 
 
+@pytest.mark.slow
 def test_other_origins_and_hosts_are_refused(
     live_store: Path, live_calibration: Path, tmp_path: Path
 ) -> None:
@@ -248,6 +249,7 @@ def test_bad_requests_get_a_clear_4xx_json_error(
     asyncio.run(run())
 
 
+@pytest.mark.slow
 def test_the_token_file_is_the_owners_only(
     live_store: Path, live_calibration: Path, tmp_path: Path
 ) -> None:
@@ -317,6 +319,7 @@ async def serve_page(html: str) -> tuple[web.AppRunner, str]:
     return runner, f"http://127.0.0.1:{runner.addresses[0][1]}/"
 
 
+@pytest.mark.slow
 def test_in_chromium_another_origin_can_do_nothing_and_the_viewer_works(
     live_store: Path, live_calibration: Path, live_capture: SyntheticCapture, tmp_path: Path
 ) -> None:
@@ -326,7 +329,7 @@ def test_in_chromium_another_origin_can_do_nothing_and_the_viewer_works(
     find_chromium()
 
     async def run() -> None:
-        cfg = config(live_calibration, live_store, wait_ms=200)
+        cfg = config(live_calibration, live_store, wait_ms=WAIT_MS)
         async with live_server([cfg], tmp_path) as (live, _http):
             assert live.server is not None and live.http_url is not None
             session = live.server.session("stage")

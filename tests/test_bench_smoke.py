@@ -12,6 +12,8 @@ from conftest import ROOT
 
 from samba.synthetic.motions import generate
 
+pytestmark = pytest.mark.slow  # benchmark-like or end to end: CI runs it
+
 
 def _bench(name: str) -> ModuleType:
     """The module of `bench/<name>.py`, loaded from its file (bench/ is no package)."""

@@ -14,6 +14,8 @@ import pytest
 
 from samba.cli import main
 
+pytestmark = pytest.mark.slow  # benchmark-like or end to end: CI runs it
+
 BPY = "bpy==5.0.1"
 MEASURE = Path(__file__).with_name("blender_measure.py")
 

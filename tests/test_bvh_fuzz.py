@@ -147,6 +147,7 @@ def fuzz_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("fuzz")
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(data=mangled())
 def test_parse_bvh_succeeds_or_raises_a_samba_error(data: bytes) -> None:

@@ -75,6 +75,7 @@ def _assert_recovered(result, truth: list[Camera], centre_cm: float = 1.0) -> No
     assert (result.rms_px < 0.5).all(), result.rms_px
 
 
+@pytest.mark.slow
 def test_detected_corners_match_the_truth(scene: Scene) -> None:
     errors = []
     for c, detections in enumerate(scene.detections):
@@ -202,6 +203,7 @@ def _write_frames(folder: Path, images: list[np.ndarray]) -> Path:
     return folder
 
 
+@pytest.mark.slow
 def test_cli_calibrates_folders_and_videos(
     scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

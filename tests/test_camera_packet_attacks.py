@@ -17,7 +17,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from live_fixtures import config, until
+import pytest
+from live_fixtures import WAIT_MS, config, until
 from mcap.reader import make_reader
 
 from samba.ingest.mcap_take import read_take
@@ -81,6 +82,7 @@ def forgeries(recorded: list[MarkerPacket], rng: random.Random) -> list[bytes]:
     return forged
 
 
+@pytest.mark.slow
 def test_a_replayed_signed_capture_adds_no_frame_and_a_restart_is_picked_up(
     live_store: Path, live_calibration: Path, live_capture: SyntheticCapture, tmp_path: Path
 ) -> None:
@@ -94,7 +96,7 @@ def test_a_replayed_signed_capture_adds_no_frame_and_a_restart_is_picked_up(
     restart_taken: list[float] = []
 
     async def run() -> tuple[dict, int, float]:
-        cfg = config(live_calibration, live_store, wait_ms=200)
+        cfg = config(live_calibration, live_store, wait_ms=WAIT_MS)
         bind = {"udp": ("127.0.0.1", 0), "http": None}
         async with LiveServer([cfg], tmp_path / "takes", **bind, keys=keys) as live:
             assert live.server is not None
@@ -154,7 +156,7 @@ def test_spoofed_far_future_timestamps_do_not_stall_the_output(
     n = live_capture.frames
 
     async def run() -> dict:
-        cfg = config(live_calibration, live_store, wait_ms=200)
+        cfg = config(live_calibration, live_store, wait_ms=WAIT_MS)
         bind = {"udp": ("127.0.0.1", 0), "http": None}
         async with LiveServer([cfg], tmp_path / "takes", **bind) as live:
             assert live.server is not None
@@ -210,7 +212,7 @@ def test_marker_pixels_outside_the_image_never_reach_the_take(
         return replace(packet, markers=markers, blobs=np.array([[1e30, 5.0]]))
 
     async def run() -> dict:
-        cfg = config(live_calibration, live_store, wait_ms=200)
+        cfg = config(live_calibration, live_store, wait_ms=WAIT_MS)
         bind = {"udp": ("127.0.0.1", 0), "http": None}
         async with LiveServer([cfg], tmp_path / "takes", **bind) as live:
             assert live.server is not None

@@ -206,6 +206,7 @@ def test_an_unknown_demo_motion_is_refused_before_anything_is_built(tmp_path: Pa
     assert not (tmp_path / "demo").exists()
 
 
+@pytest.mark.slow
 def test_demo_captures_live_and_writes_the_take_and_exports(tmp_path: Path, capsys) -> None:
     earlier = tmp_path / "cameras.toml"
     earlier.write_text("an earlier demo's")
@@ -238,6 +239,7 @@ def test_an_unwritable_place_gives_one_clear_line(tmp_path: Path, capsys) -> Non
     assert err.startswith("samba: error:") and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_demo_with_an_avatar_streams_and_exports_onto_it(
     tmp_path: Path, capsys, monkeypatch: pytest.MonkeyPatch
 ) -> None:

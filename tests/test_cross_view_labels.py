@@ -285,6 +285,7 @@ def test_a_subject_turning_side_on_gets_no_marker_on_the_other_shoulder() -> Non
     assert np.nanmax(error) < 0.05
 
 
+@pytest.mark.slow
 def test_four_cameras_keep_a_salsas_feet_apart(cmu_files: list[Path]) -> None:
     # Four 640x480 cameras round a salsa (8 s of daz_salsa_01), the trackers' distances
     # 8% tighter (as for a subject 6.5 m away): a camera's tracker put the left foot's

@@ -119,6 +119,7 @@ def test_a_node_films_the_takes_own_markers(stage: Stage, capsys) -> None:
     assert np.nanmax(np.linalg.norm(blend_end - first, axis=-1)) < 0.05
 
 
+@pytest.mark.slow
 def test_the_demo_plays_the_take_and_records_real_motion(
     stage: Stage, live_store: Path, tmp_path: Path, capsys
 ) -> None:

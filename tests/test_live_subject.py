@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from live_fixtures import config, offline_poses, until
+from live_fixtures import WAIT_MS, config, offline_poses, until
 
 from samba.ingest.mcap_take import read_take
 from samba.reconstruct import SkinOffsets
@@ -28,7 +28,7 @@ def test_a_session_calibrates_its_subject_and_stores_the_offsets_with_its_take(
     workers: int,
 ) -> None:
     async def run() -> None:
-        cfg = config(live_calibration, live_store, wait_ms=200, calibrate_s=0.5)
+        cfg = config(live_calibration, live_store, wait_ms=WAIT_MS, calibrate_s=0.5)
         bind = {"udp": ("127.0.0.1", 0), "http": None, "workers": workers}
         async with LiveServer([cfg], tmp_path / "takes", **bind) as live:
             assert live.server is not None

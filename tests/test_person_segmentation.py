@@ -30,6 +30,7 @@ def cam01() -> np.ndarray:
     return np.stack(frames)
 
 
+@pytest.mark.slow
 def test_the_subject_is_found_in_real_footage_without_an_empty_stage(cam01: np.ndarray) -> None:
     height, width = cam01.shape[1:3]
     with PersonSegmenter("cam01.mp4", (width, height)) as segmenter:

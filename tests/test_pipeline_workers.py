@@ -173,6 +173,7 @@ def test_sessions_spread_over_the_workers_and_a_bad_file_is_named(
     assert not any(Path(f"/proc/{pid}").exists() for pid in pids)
 
 
+@pytest.mark.slow
 def test_a_worker_that_dies_is_replaced_and_its_session_goes_on(
     live_store: Path, live_calibration: Path, live_capture: SyntheticCapture
 ) -> None:

@@ -22,6 +22,8 @@ from test_track_video import samba
 
 from samba.ingest import read_bvh, read_take
 
+pytestmark = pytest.mark.slow  # benchmark-like or end to end: CI runs it
+
 FIRST_FRAME = 80
 """First video frame of the slice; it runs to the clip's last, 99."""
 FPS = 60.0

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from aiohttp import ClientSession
-from live_fixtures import VmcReceiver, config, offline_poses, until
+from live_fixtures import WAIT_MS, VmcReceiver, config, offline_poses, until
 
 from samba.base.errors import InputError
 from samba.ingest.mcap_take import read_take
@@ -40,7 +40,7 @@ def test_live_path_gives_the_offline_poses_and_streams_every_frame(
     vmc = VmcReceiver()
 
     async def run() -> dict:
-        cfg = config(live_calibration, live_store, vmc=[vmc.target], wait_ms=200)
+        cfg = config(live_calibration, live_store, vmc=[vmc.target], wait_ms=WAIT_MS)
         bind = {"udp": ("127.0.0.1", 0), "http": None, "workers": workers}
         async with LiveServer([cfg], tmp_path / "takes", **bind) as live:
             assert live.server is not None
@@ -79,7 +79,7 @@ def test_sessions_whose_packets_arrive_together_each_get_the_offline_poses(
     names = ("a", "b", "c")
 
     async def run() -> dict:
-        cfgs = [config(live_calibration, live_store, name=n, wait_ms=200) for n in names]
+        cfgs = [config(live_calibration, live_store, name=n, wait_ms=WAIT_MS) for n in names]
         bind = {"udp": ("127.0.0.1", 0), "http": None, "workers": workers}
         async with LiveServer(cfgs, tmp_path / "takes", **bind) as live:
             assert live.server is not None
@@ -289,6 +289,7 @@ def test_a_session_wanting_more_cameras_than_it_has_is_refused(
         asyncio.run(serve())
 
 
+@pytest.mark.slow
 def test_samba_serve_command(live_store: Path, live_calibration: Path, tmp_path: Path) -> None:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
         probe.bind(("127.0.0.1", 0))

@@ -26,6 +26,8 @@ from samba.service.packet import decode, encode
 from samba.service.server import CaptureServer
 from samba.service.synthetic_capture import SyntheticCapture, play
 
+pytestmark = pytest.mark.slow  # benchmark-like or end to end: CI runs it
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -21,6 +21,8 @@ from samba.silhouette.tracker import SilhouetteTracker, TrackerSettings
 from samba.silhouette.view import SilhouetteView
 from samba.synthetic.motions import generate, library
 
+pytestmark = pytest.mark.slow  # benchmark-like or end to end: CI runs it
+
 CAMERA = Camera.look_at("front", (0.0, 1.2, 3.6), (0.0, 0.9, 0.0), (320, 240), 55.0)
 BODY = BodyModel.for_subject(1.75)
 

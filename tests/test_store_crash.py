@@ -37,6 +37,8 @@ from samba.db.index import PoseIndex
 from samba.db.pose_files import POSE_BYTES, ROW_BYTES
 from samba.db.store import INDEX, PoseStore
 
+pytestmark = pytest.mark.slow  # benchmark-like or end to end: CI runs it
+
 ROOT = Path(__file__).resolve().parents[1]
 WRITER = Path(__file__).with_name("store_writer.py")
 TIMEOUT = 120.0

@@ -136,6 +136,7 @@ def _assert_one_line_error(code: int, err: str, *names: str | Path) -> None:
 # --- samba db tree -------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_db_tree_saves_the_tree_in_the_store_and_prints_its_node_counts(stage: Stage) -> None:
     assert stage.tree_code == 0
     path = stage.store / "shape_trees" / "front-men-L.npz"
@@ -200,6 +201,7 @@ def test_empty_frames_at_the_start_of_the_video_work_like_a_background(
     assert same.mean() >= 0.9, f"{np.count_nonzero(~same)} of {len(same)} frames differ"
 
 
+@pytest.mark.slow
 def test_an_mjpg_video_is_tracked(stage: Stage, tmp_path: Path) -> None:
     shot = footage()
     video = tmp_path / "wave.avi"

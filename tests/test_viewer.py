@@ -337,6 +337,7 @@ def _changed_pixels(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> int:
     return int((differs & mask).sum())
 
 
+@pytest.mark.slow
 def test_page_in_chromium_shows_the_skeleton_moving() -> None:
     find_chromium()
     text = "document.getElementById({!r}).textContent".format
