@@ -43,7 +43,7 @@ def test_eval_prints_tables_writes_json_and_plots(picked, tmp_path: Path, capsys
         "--test",
         picked[0],
         "--methods",
-        "nn,chai,samba,best",
+        ",".join(METHODS),
         "--max-frames",
         "60",
         "--json",

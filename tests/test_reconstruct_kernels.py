@@ -81,7 +81,7 @@ def database() -> np.ndarray:
     return np.concatenate([t.poses for t in library(takes_per_motion=1, seconds=4.0)])
 
 
-@pytest.mark.parametrize("name", ["chai", "samba", "best", "lwr"])
+@pytest.mark.parametrize("name", ["chai", "samba", "best", "lwr", "smoothed"])
 def test_whole_takes_agree_with_the_numpy_path(
     name: str, database: np.ndarray, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -7,6 +7,8 @@
 | `samba` | the paper: K = 10, N = 10 pseudo-poses, local PCA, prior + marker + smoothness |
 | `best` | our best configuration (see `BEST`) |
 | `lwr` | `best` with each part's joints by a local linear regression (see `LWR`) |
+| `calibrated` | `lwr` with the subject's thighs and neck calibrated (see `CALIBRATED`) |
+| `smoothed` | `calibrated` with the unobserved joints smoothed over frames (see `SMOOTHED`) |
 """
 
 from __future__ import annotations
@@ -40,10 +42,16 @@ BEST = ReconstructionConfig(
 (docs/design/reconstruction.md)."""
 LWR = replace(BEST, part_k=128, part_ridge=3e-5)
 """`best` with the elbows, hips and head of each frame by a locally weighted linear
-regression on each part's markers over its 200 nearest poses (issue 44;
+regression on each part's markers over its 128 nearest poses (issue 44;
 `samba.reconstruct.local_regression`). K of 64, 128 and 200 and ridges of 1e-5 to 1e-4
 m^2 tried leave-one-take-out over the takes outside the validation split of
-`bench/eval_cmu.sh`."""
+`bench/eval_cmu.sh` (200 gave 0.01 cm less for 0.1 ms more per frame)."""
+CALIBRATED = replace(LWR, calibration_frames=90)
+"""`lwr` with the subject's thighs and neck calibrated over the first 90 frames (3 s) of
+a take (`samba.reconstruct.bone_calibration`)."""
+SMOOTHED = replace(CALIBRATED, joint_smoothing=0.75)
+"""`calibrated` with the head, elbows and hips smoothed over the frames, 0.75 on the newest
+(`samba.reconstruct.joint_smoothing`)."""
 
 
 @dataclass(frozen=True)
@@ -78,6 +86,12 @@ METHODS: dict[str, Method] = {
     "samba": Method("samba", "the paper: K = 10, N = 10 pseudo-poses, local PCA", PAPER),
     "best": Method("best", "our best configuration", BEST, mirrored_database=True),
     "lwr": Method("lwr", "best, parts by local linear regression", LWR, mirrored_database=True),
+    "calibrated": Method(
+        "calibrated", "lwr, thighs and neck calibrated", CALIBRATED, mirrored_database=True
+    ),
+    "smoothed": Method(
+        "smoothed", "calibrated, unobserved joints smoothed", SMOOTHED, mirrored_database=True
+    ),
 }
 """Every method `samba eval` knows, by name."""
 

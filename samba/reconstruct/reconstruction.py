@@ -35,6 +35,8 @@ import numpy as np
 
 from samba.base import KernelSet, kernels_enabled, usable_cores
 from samba.body import N_JOINTS, N_MARKERS, Alignment, has_heading, markers_of, standard_pose
+from samba.reconstruct.bone_calibration import BoneCalibration
+from samba.reconstruct.joint_smoothing import JointSmoothing
 from samba.reconstruct.local_space import (
     POSE_DIMS,
     ROUNDING_VARIANCE,
@@ -80,7 +82,11 @@ class ReconstructionConfig:
     holds a missing marker at its last observation for up to that many frames
     (`samba.reconstruct.marker_hold`) in frames that the markers seen make usable;
     markers held count for the solve but not for `markers_used`, the residual or the
-    confidence.
+    confidence. `calibration_frames` > 0 calibrates the thighs and the neck over that many
+    first reconstructed frames of a take and holds them to it
+    (`samba.reconstruct.bone_calibration`). `joint_smoothing` < 1 smooths the head, elbows
+    and hips over the frames with that weight on the newest
+    (`samba.reconstruct.joint_smoothing`); 1 leaves them as estimated.
     """
 
     k: int = 10
@@ -101,6 +107,8 @@ class ReconstructionConfig:
     min_bandwidth: float = 0.005
     shoulder_origin: bool = True
     hold_frames: int = 10
+    calibration_frames: int = 0
+    joint_smoothing: float = 1.0
 
     def __post_init__(self) -> None:
         if self.k < 1 or self.n < 1:
@@ -113,6 +121,10 @@ class ReconstructionConfig:
             raise ValueError(f"part_ridge must be >= 0, got {self.part_ridge}")
         if self.hold_frames < 0:
             raise ValueError(f"hold_frames must be >= 0, got {self.hold_frames}")
+        if self.calibration_frames < 0:
+            raise ValueError(f"calibration_frames must be >= 0, got {self.calibration_frames}")
+        if not 0.0 < self.joint_smoothing <= 1.0:
+            raise ValueError(f"joint_smoothing must be in (0, 1], got {self.joint_smoothing}")
 
     @property
     def alpha(self) -> float:
@@ -183,7 +195,8 @@ class Reconstructor:
 
     `source` gives the K nearest poses (a `samba.db.index.PoseIndex`, or anything with its
     `query`, `poses` and `scale_by_tibia`). The reconstructor keeps the last two
-    estimates for the smoothness term and the markers it holds (`held`); `reset` forgets
+    estimates for the smoothness term, the markers it holds (`held`), the bones it
+    calibrates (`calibration`) and the joints it smooths (`smoothing`); `reset` forgets
     them (a new take).
     """
 
@@ -195,6 +208,8 @@ class Reconstructor:
         )
         self._history: list[np.ndarray] = []
         self._held = MarkerHold(self.config.hold_frames)
+        self._calibration = BoneCalibration(self.config.calibration_frames)
+        self._smoothing = JointSmoothing(self.config.joint_smoothing)
         if kernels_enabled():
             _kernels().KERNELS.warm_up()
         self.prepare(1)
@@ -225,9 +240,12 @@ class Reconstructor:
         return len(markers) - 1
 
     def reset(self) -> None:
-        """Forget the previous estimates and the markers held."""
+        """Forget the previous estimates, the markers held, the bones calibrated and the
+        joints smoothed."""
         self._history = []
         self._held.reset()
+        self._calibration.reset()
+        self._smoothing.reset()
 
     @property
     def held(self) -> MarkerHold:
@@ -238,6 +256,25 @@ class Reconstructor:
     @held.setter
     def held(self, state: MarkerHold) -> None:
         self._held = state.copy()
+
+    @property
+    def calibration(self) -> BoneCalibration:
+        """A copy of the bone lengths calibrated so far; set it to go back to an earlier
+        state (with `history` and `held`)."""
+        return self._calibration.copy()
+
+    @calibration.setter
+    def calibration(self, state: BoneCalibration) -> None:
+        self._calibration = state.copy()
+
+    @property
+    def smoothing(self) -> JointSmoothing:
+        """A copy of the smoothed joints' state; set it to go back to an earlier state."""
+        return self._smoothing.copy()
+
+    @smoothing.setter
+    def smoothing(self, state: JointSmoothing) -> None:
+        self._smoothing = state.copy()
 
     @property
     def history(self) -> list[np.ndarray]:
@@ -484,6 +521,8 @@ def _reconstruct(
         poses[frames] = refine_with_parts(
             model.source, filled, poses[frames], cfg.part_k, cfg.eps, cfg.part_ridge
         )
+    if (cfg.calibration_frames or cfg.joint_smoothing < 1.0) and len(frames):
+        poses[frames] = _calibrated_and_smoothed([owners[i] for i in frames], poses[frames])
     diff = np.where(observed[..., None], markers_of(poses) - markers, 0.0)
     squared = np.einsum("fmc,fmc->fm", diff, diff)
     used = np.where(usable, observed.sum(axis=1), 0)
@@ -497,6 +536,19 @@ def _held_markers(owners: list[Reconstructor], markers: np.ndarray) -> np.ndarra
     if all(owner is owners[0] for owner in owners):
         return owners[0]._held.fill(markers)
     return np.concatenate([o._held.fill(m[None]) for o, m in zip(owners, markers, strict=True)])
+
+
+def _calibrated_and_smoothed(owners: list[Reconstructor], poses: np.ndarray) -> np.ndarray:
+    """Poses (F, 13, 3) with each owner's calibrated bones, then its smoothed joints,
+    frame i by owners[i]."""
+    if all(owner is owners[0] for owner in owners):
+        return owners[0]._smoothing.apply(owners[0]._calibration.apply(poses))
+    return np.concatenate(
+        [
+            o._smoothing.apply(o._calibration.apply(p[None]))
+            for o, p in zip(owners, poses, strict=True)
+        ]
+    )
 
 
 def _kernels() -> ModuleType:

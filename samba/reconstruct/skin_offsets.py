@@ -209,6 +209,8 @@ class SkinMarkerReconstructor:
         second; continues from (and updates) the previous estimates."""
         markers = np.asarray(markers, dtype=np.float64)
         history, held = self.inner.history, self.inner.held
+        calibration, smoothing = self.inner.calibration, self.inner.smoothing
         first = self.inner.reconstruct(markers)
         self.inner.history, self.inner.held = history, held
+        self.inner.calibration, self.inner.smoothing = calibration, smoothing
         return self.inner.reconstruct(self.offsets.joints(markers, first.poses))
