@@ -109,15 +109,17 @@ def test_whole_takes_agree_with_the_numpy_path(
 def test_local_regression_agrees_with_numpy(
     scale_by_tibia: bool, database: np.ndarray, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    # 40 neighbours of three observations, one without its right wrist and a knee.
+    # 40 neighbours of three observations, one without its right wrist and a knee; the
+    # second asks for two joints only.
     rng = np.random.default_rng(3)
     neighbours = database[rng.integers(0, len(database), size=(3, 40))].astype(np.float64)
     markers = markers_of(database[[5, 300, 700]]) + rng.normal(0.0, 0.01, (3, 8, 3))
     markers[2, [3, 4]] = np.nan
     distances = np.sort(rng.uniform(0.01, 0.2, size=(3, 40)), axis=1)
-    joints = [3, 4, 7, 8, 0]
+    joints = np.array([[3, 4, 7], [0, 8, -1], [7, 8, 0]])
     compiled = local_regression(markers, neighbours, distances, joints, scale_by_tibia, 3e-5)
     monkeypatch.setenv("SAMBA_KERNELS", "numpy")
     reference = local_regression(markers, neighbours, distances, joints, scale_by_tibia, 3e-5)
-    assert compiled.shape == (3, 5, 3)
+    assert compiled.shape == (3, 3, 3)
+    assert np.isnan(compiled[1, 2]).all() and not np.isnan(compiled[[0, 2]]).any()
     np.testing.assert_allclose(compiled, reference, atol=TOLERANCE_M, rtol=0)

@@ -15,9 +15,12 @@ from __future__ import annotations
 
 import numpy as np
 
-BONES: tuple[tuple[tuple[int, ...], int], ...] = (((9,), 7), ((10,), 8), ((1, 2), 0))
-"""(anchor joints, joint) of each calibrated bone: the thighs from the knees, the neck from
-the shoulder midpoint (the anchor is the mean of its joints)."""
+BONES: tuple[tuple[int, tuple[int, int]], ...] = ((7, (9, 9)), (8, (10, 10)), (0, (1, 2)))
+"""(joint, the two joints whose midpoint anchors it) of each calibrated bone: the thighs
+from the knees, the neck from the shoulder midpoint."""
+_JOINTS = [joint for joint, _ in BONES]
+_FIRST = [pair[0] for _, pair in BONES]
+_SECOND = [pair[1] for _, pair in BONES]
 
 
 class BoneCalibration:
@@ -32,15 +35,18 @@ class BoneCalibration:
     def __init__(self, frames: int) -> None:
         self.frames = frames
         self.lengths = np.empty((0, len(BONES)))
+        self._settled = np.full(len(BONES), np.nan)
 
     def reset(self) -> None:
         """Forget the lengths recorded (a new take)."""
         self.lengths = np.empty((0, len(BONES)))
+        self._settled = np.full(len(BONES), np.nan)
 
     def copy(self) -> BoneCalibration:
         """An independent copy of this state."""
         calibration = BoneCalibration(self.frames)
         calibration.lengths = self.lengths.copy()
+        calibration._settled = self._settled.copy()
         return calibration
 
     def apply(self, poses: np.ndarray) -> np.ndarray:
@@ -48,16 +54,19 @@ class BoneCalibration:
         out = np.array(poses, dtype=np.float64)
         if self.frames <= 0 or not len(out):
             return out
-        anchors = np.stack([out[:, list(anchor)].mean(axis=1) for anchor, _ in BONES], axis=1)
-        joints = [joint for _, joint in BONES]
-        bones = out[:, joints] - anchors
+        anchors = 0.5 * (out[:, _FIRST] + out[:, _SECOND])
+        bones = out[:, _JOINTS] - anchors
         lengths = np.linalg.norm(bones, axis=-1)
-        recorded = len(self.lengths)
-        self.lengths = np.concatenate([self.lengths, lengths[: self.frames - recorded]])
-        counts = np.minimum(recorded + np.arange(1, len(out) + 1), self.frames)
         targets = np.empty_like(lengths)
-        for count in np.unique(counts):
-            targets[counts == count] = np.median(self.lengths[:count], axis=0)
+        recorded = len(self.lengths)
+        if recorded < self.frames:
+            self.lengths = np.concatenate([self.lengths, lengths[: self.frames - recorded]])
+            counts = np.minimum(recorded + np.arange(1, len(out) + 1), self.frames)
+            for count in np.unique(counts):
+                targets[counts == count] = np.median(self.lengths[:count], axis=0)
+            self._settled = targets[-1]
+        else:
+            targets[:] = self._settled
         scale = targets / np.maximum(lengths, 1e-9)
-        out[:, joints] = anchors + bones * scale[..., None]
+        out[:, _JOINTS] = anchors + bones * scale[..., None]
         return out

@@ -175,23 +175,26 @@ def part_regressions_kernel(
     ridge: float,
     width: float,
 ) -> np.ndarray:
-    """`local_regression.local_regression_numpy`: the `joints` (J,) of markers (b, 8, 3) world
-    meters (NaN = missing) by a locally weighted linear regression over their neighbours
-    (b, K, 13, 3) world meters at feature distances (b, K), kernel `width` times the
-    nearest distance, `ridge` (m^2) on the slopes; returns (b, J, 3) world meters. Only
-    the markers present enter the design, which gives the numpy reference's solution."""
+    """`local_regression.local_regression_numpy`: each observation's `joints` (b, J) (-1:
+    none, NaN back) of markers (b, 8, 3) world meters (NaN = missing) by a locally
+    weighted linear regression over their neighbours (b, K, 13, 3) world meters at
+    feature distances (b, K), kernel `width` times the nearest distance, `ridge` (m^2) on
+    the slopes; returns (b, J, 3) world meters. Only the markers present enter the
+    design, which gives the numpy reference's solution."""
     b, k = neighbours.shape[0], neighbours.shape[1]
-    outputs = 3 * joints.shape[0]
-    out = np.empty((b, joints.shape[0], 3))
+    outputs = 3 * joints.shape[1]
+    out = np.empty((b, joints.shape[1], 3))
     present = np.empty(N_MARKERS, dtype=np.bool_)
     origin = np.empty(3)
     turn = np.empty(4)
     neighbour_origin = np.empty(3)
     neighbour_turn = np.empty(4)
     observed = np.empty((N_MARKERS, 3))
+    seen = np.empty((N_MARKERS, 3))
     aligned = np.empty((N_JOINTS, 3))
+    weights = np.empty(k)
     row = np.empty(1 + 3 * N_MARKERS)
-    estimate = np.empty((joints.shape[0], 3))
+    estimate = np.empty((joints.shape[1], 3))
     for f in range(b):
         dims = 1
         for i in range(N_MARKERS):
@@ -202,12 +205,13 @@ def part_regressions_kernel(
         normal = np.zeros((dims, dims))
         rhs = np.zeros((dims, outputs))
         nearest = width * max(distances[f, 0], 1e-3)
-        total = 0.0
         for j in range(k):
-            total += np.exp(-((distances[f, j] / nearest) ** 2))
+            weights[j] = np.exp(-((distances[f, j] / nearest) ** 2))
+        weights /= np.sum(weights)
         for j in range(k):
-            weight = np.exp(-((distances[f, j] / nearest) ** 2)) / total
-            seen = neighbours[f, j][_MARKER_JOINTS]
+            for i in range(N_MARKERS):
+                for c in range(3):
+                    seen[i, c] = neighbours[f, j, _MARKER_JOINTS[i], c]
             alignment_of(seen, present, scale_by_tibia, neighbour_origin, neighbour_turn)
             apply_alignment(neighbours[f, j], neighbour_origin, neighbour_turn, aligned)
             row[0] = 1.0
@@ -218,22 +222,26 @@ def part_regressions_kernel(
                         row[d] = aligned[_MARKER_JOINTS[i], c] - observed[i, c]
                         d += 1
             for p in range(dims):
-                weighted = weight * row[p]
+                weighted = weights[j] * row[p]
                 for q in range(p, dims):
                     normal[p, q] += weighted * row[q]
-                for o in range(joints.shape[0]):
+                for o in range(joints.shape[1]):
+                    joint = max(joints[f, o], 0)
                     for c in range(3):
-                        rhs[p, 3 * o + c] += weighted * aligned[joints[o], c]
+                        rhs[p, 3 * o + c] += weighted * aligned[joint, c]
         for p in range(dims):
             for q in range(p):
                 normal[p, q] = normal[q, p]
             if p > 0:
                 normal[p, p] += ridge
         solution = np.linalg.solve(normal, rhs)
-        for o in range(joints.shape[0]):
+        for o in range(joints.shape[1]):
             for c in range(3):
                 estimate[o, c] = solution[0, 3 * o + c]
         invert_alignment(estimate, origin, turn, out[f])
+        for o in range(joints.shape[1]):
+            if joints[f, o] < 0:
+                out[f, o] = np.nan
     return out
 
 
@@ -480,7 +488,7 @@ def _example_regressions() -> np.ndarray:
     pose = standard_pose()
     markers = np.ascontiguousarray(pose[list(MARKER_JOINTS)][None])
     neighbours = np.ascontiguousarray(np.repeat(pose[None, None], 2, axis=1))
-    joints = np.zeros(1, dtype=np.int64)
+    joints = np.zeros((1, 1), dtype=np.int64)
     return part_regressions_kernel(markers, neighbours, np.zeros((1, 2)), joints, False, 1.0, 2.0)
 
 

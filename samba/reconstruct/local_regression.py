@@ -13,8 +13,6 @@ against the mean.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 
 from samba.base import kernels_enabled
@@ -29,13 +27,14 @@ def local_regression(
     markers: np.ndarray,
     neighbours: np.ndarray,
     distances: np.ndarray,
-    joints: Sequence[int],
+    joints: np.ndarray,
     scale_by_tibia: bool,
     ridge: float,
 ) -> np.ndarray:
-    """The `joints` (b, J, 3), world meters, of markers (b, 8, 3) (world meters, NaN =
-    missing) by a locally weighted linear regression over their neighbours
-    (b, K, 13, 3) world meters at index feature distances (b, K) meters.
+    """Each observation's `joints` (b, J) (joint indices, -1 = none: NaN comes back) as
+    (b, J, 3) world meters, from markers (b, 8, 3) (world meters, NaN = missing) by a
+    locally weighted linear regression over their neighbours (b, K, 13, 3) world meters
+    at index feature distances (b, K) meters.
 
     Each neighbour is aligned by the markers present (`samba.body.Alignment`, as the
     index compares them, scaled by the tibia when `scale_by_tibia`); the regression maps
@@ -51,7 +50,7 @@ def local_regression(
             np.ascontiguousarray(markers),
             np.ascontiguousarray(neighbours),
             np.ascontiguousarray(distances),
-            np.asarray(joints, dtype=np.int64),
+            np.ascontiguousarray(joints, dtype=np.int64),
             scale_by_tibia,
             ridge,
             REGRESSION_WIDTH,
@@ -63,7 +62,7 @@ def local_regression_numpy(
     markers: np.ndarray,
     neighbours: np.ndarray,
     distances: np.ndarray,
-    joints: Sequence[int],
+    joints: np.ndarray,
     scale_by_tibia: bool,
     ridge: float,
 ) -> np.ndarray:
@@ -86,6 +85,9 @@ def local_regression_numpy(
     weighted = design.swapaxes(1, 2) * weights[:, None]
     penalty = np.full(design.shape[2], ridge)
     penalty[0] = 0.0
-    targets = aligned[:, :, list(joints)].reshape(b, k, -1)
+    joints = np.asarray(joints)
+    chosen = np.maximum(joints, 0)[:, None, :, None]
+    targets = np.take_along_axis(aligned, chosen, axis=2).reshape(b, k, -1)
     solution = np.linalg.solve(weighted @ design + np.diag(penalty), weighted @ targets)
-    return observation.invert(solution[:, 0].reshape(b, len(joints), 3))
+    estimate = observation.invert(solution[:, 0].reshape(b, joints.shape[1], 3))
+    return np.where(joints[..., None] >= 0, estimate, np.nan)

@@ -40,12 +40,13 @@ BEST = ReconstructionConfig(
 )
 """Our best configuration, chosen by leave-one-take-out evaluation
 (docs/design/reconstruction.md)."""
-LWR = replace(BEST, part_k=128, part_ridge=3e-5)
+LWR = replace(BEST, part_k=96, part_ridge=3e-5)
 """`best` with the elbows, hips and head of each frame by a locally weighted linear
-regression on each part's markers over its 128 nearest poses (issue 44;
-`samba.reconstruct.local_regression`). K of 64, 128 and 200 and ridges of 1e-5 to 1e-4
-m^2 tried leave-one-take-out over the takes outside the validation split of
-`bench/eval_cmu.sh` (200 gave 0.01 cm less for 0.1 ms more per frame)."""
+regression on each part's markers over its 96 nearest poses (issue 44;
+`samba.reconstruct.local_regression`). K of 64 to 200 and ridges of 1e-5 to 1e-4 m^2
+tried leave-one-take-out over the takes outside the validation split of
+`bench/eval_cmu.sh`: 128 and 200 neighbours took 0.02-0.03 cm off the unobserved joints
+for 0.06-0.15 ms more per frame, 64 put 0.02 cm on them."""
 CALIBRATED = replace(LWR, calibration_frames=90)
 """`lwr` with the subject's thighs and neck calibrated over the first 90 frames (3 s) of
 a take (`samba.reconstruct.bone_calibration`)."""

@@ -85,18 +85,19 @@ def refine_with_parts(
     neighbours = np.asarray(source.poses[rows.reshape(-1)], dtype=np.float64)
     neighbours = neighbours.reshape(len(queried), k, N_JOINTS, 3)
     scale = bool(source.scale_by_tibia)
-    ends = np.cumsum(ok.sum(axis=1))
-    for part, chosen, end in zip(parts, ok, ends, strict=True):
-        frames = slice(end - chosen.sum(), end)
+    counts = ok.sum(axis=1)
+    ends = np.cumsum(counts)
+    if ridge:
+        joints = np.full((len(queried), max(len(part.joints) for part in parts)), -1)
+        for part, count, end in zip(parts, counts, ends, strict=True):
+            joints[end - count : end, : len(part.joints)] = part.joints
+        estimates = local_regression(queried, neighbours, distances, joints, scale, ridge)
+    else:
+        estimates = neighbour_mean(queried, neighbours, distances, scale)
+    for part, chosen, count, end in zip(parts, ok, counts, ends, strict=True):
         joints = list(part.joints)
-        if ridge:
-            estimate = local_regression(
-                queried[frames], neighbours[frames], distances[frames], joints, scale, ridge
-            )
-        else:
-            estimate = neighbour_mean(
-                queried[frames], neighbours[frames], distances[frames], scale
-            )[:, joints]
+        estimate = estimates[end - count : end]
+        estimate = estimate[:, : len(joints)] if ridge else estimate[:, joints]
         rows = np.flatnonzero(chosen)
         blended = (1.0 - part.weight) * out[rows][:, joints] + part.weight * estimate
         out[rows[:, None], joints] = blended
