@@ -9,6 +9,12 @@ The capture math lives in one subpackage per concern (`samba.body`, `samba.recon
 only through their faces (their `__init__`), in that order of layers.
 """
 
+import time
+
 from samba.base import InputError, SambaError
 
-__all__ = ["InputError", "SambaError"]
+LAUNCHED_AT = time.time()
+"""When this process first imported samba, UNIX seconds: for a `samba` command, about
+when it was launched, before its own start-up (importing, loading, compiling)."""
+
+__all__ = ["LAUNCHED_AT", "InputError", "SambaError"]

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import samba.service.cli.node
 import samba.service.node
 from samba.body.skeleton import markers_of
 from samba.cameras.calibration_file import write_calibration
@@ -348,9 +349,13 @@ def test_ctrl_c_ends_with_the_summary(
     assert len(status.getvalue().splitlines()) == 5
 
 
-def test_a_start_time_in_the_past_is_one_line_naming_the_flag(
-    rig: Rig, receiver: Receiver, capsys: pytest.CaptureFixture[str]
+def test_a_start_time_before_the_node_started_is_one_line_naming_the_flag(
+    rig: Rig,
+    receiver: Receiver,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    monkeypatch.setattr(samba.service.cli.node, "LAUNCHED_AT", time.time())
     past = time.time() - 100.0
     code, out, err = run(
         capsys, node(rig, receiver.address, *synthetic(0, "--start-at", str(past)))
@@ -360,6 +365,21 @@ def test_a_start_time_in_the_past_is_one_line_naming_the_flag(
     assert err.startswith(f"samba: error: --start-at {past:.1f}: is 1")
     assert re.search(r"is 1\d\d\.\d s in the past", err), err
     assert receiver.datagrams(idle=0.05) == []
+
+
+def test_a_start_time_the_node_passed_while_starting_is_its_start_up(
+    rig: Rig,
+    receiver: Receiver,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    now = time.time()
+    monkeypatch.setattr(samba.service.cli.node, "LAUNCHED_AT", now - 10.0)
+    argv = synthetic(0, "--start-at", repr(now - 1.0), "--seconds", "0.1")
+    code, out, err = run(capsys, node(rig, receiver.address, *argv))
+    assert code == 0, err
+    assert re.search(r"the first \d+ late while the node started", out), out
+    assert len(receiver.packets()) == round(1.1 * FPS)
 
 
 def with_deadlines(rig: Rig, past: list[bool]) -> list[Capture]:

@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 
+from samba import LAUNCHED_AT
 from samba.base import InputError, address, finite_float, natural, positive_float
 from samba.body import KINDS, N_MARKERS
 from samba.cameras import read_calibration
@@ -163,7 +164,8 @@ def register(parser: argparse.ArgumentParser) -> None:
         "--start-at",
         type=finite_float,
         metavar="T",
-        help="UNIX time of frame 0, in the future unless --no-pace; frame i is captured at "
+        help="UNIX time of frame 0, not before the node starts unless --no-pace; frame i is "
+        "captured at "
         f"T + i / fps (default: {START_DELAY_SECONDS:g} s after the node is ready). Nodes "
         "given the same motion, seed and T film the same instants, e.g. T=$(( $(date +%%s) "
         "+ 5 ))",
@@ -247,7 +249,7 @@ def run(args: argparse.Namespace) -> int:
     source ends (or Ctrl-C); print the run's summary."""
     kind = _source_of(args)
     if args.start_at is not None and not args.no_pace:
-        _check_ahead(args.start_at, time.time())
+        _check_ahead(args.start_at, LAUNCHED_AT, time.time())
     cameras = read_calibration(args.calib)
     if args.camera >= len(cameras):
         raise InputError(
@@ -325,10 +327,11 @@ def _source_of(args: argparse.Namespace) -> str:
     return source
 
 
-def _check_ahead(start_at: float, now: float) -> None:
-    """InputError naming `--start-at` when `start_at` (UNIX seconds) is before `now`: every
-    frame of a paced capture would be late."""
-    if start_at < now:
+def _check_ahead(start_at: float, launched: float, now: float) -> None:
+    """InputError naming `--start-at` when `start_at` (UNIX seconds) is before `launched`,
+    when the node was started (`samba.LAUNCHED_AT`): every frame of a paced capture would
+    be late. A time the node's own start-up passed (before `now`) is its start-up's."""
+    if start_at < launched:
         raise InputError(
             f"--start-at {start_at:.1f}",
             f"is {now - start_at:,.1f} s in the past (every frame would be late); give a time "
