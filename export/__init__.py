@@ -1,6 +1,6 @@
 """Retargeting the 13-joint skeleton onto humanoid avatars (the built-in mannequin, or a
 user's USD / glTF / VRM avatar), live for VMC and offline for takes, and the USD, glTF
-and BVH writers (`samba export`).
+and BVH writers (`samba export`); skeleton-only avatars named as other tools name bones.
 """
 
 from samba.export.avatar_file import avatar_humanoid, read_avatar_rig
@@ -10,10 +10,12 @@ from samba.export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
 from samba.export.live_retarget import LiveRetarget, retarget_together
 from samba.export.mannequin import mannequin
 from samba.export.motion import HumanoidMotion
+from samba.export.named_avatars import AVATAR_CONVENTIONS, glb_with_json, write_named_avatar
 from samba.export.outputs import FORMAT_SUFFIXES, Avatar, format_of, load_avatar, write_export
 from samba.export.retargeting import retarget
 
 __all__ = [
+    "AVATAR_CONVENTIONS",
     "BONE_NAMES",
     "FORMAT_SUFFIXES",
     "N_BONES",
@@ -25,6 +27,7 @@ __all__ = [
     "LiveRetarget",
     "avatar_humanoid",
     "format_of",
+    "glb_with_json",
     "load_avatar",
     "mannequin",
     "read_avatar_rig",
@@ -33,4 +36,5 @@ __all__ = [
     "write_bvh_motion",
     "write_export",
     "write_glb",
+    "write_named_avatar",
 ]

@@ -1,7 +1,8 @@
 """Importers: BVH of any rig and recorded MCAP takes to 13-joint takes in meters, +Y up
 (rig mapping, unit and up-axis detection, resampling), and batch import into a pose store;
-marker takes (C3D files, recorded takes' markers) with their marker sets, and the reference
-joint centres of a full marker set by published rules.
+marker takes (C3D files, recorded takes' markers) with their marker sets, the reference
+joint centres of a full marker set by published rules, and a BVH rig rewritten as other
+tools write theirs (`rig_variant`).
 """
 
 from samba.ingest.batch import FileResult, expand_paths, import_paths, read_file
@@ -15,6 +16,7 @@ from samba.ingest.marker_takes import read_marker_take, read_recorded_markers
 from samba.ingest.mcap_take import POSE_TOPIC, SUBJECT_METADATA, TAKE_METADATA, read_take
 from samba.ingest.normalize import floor_height
 from samba.ingest.resolver import HumanoidMap, SkeletonTree, name_kind, resolve_humanoid
+from samba.ingest.rig_variants import RIG_CONVENTIONS, RIG_STRUCTURES, rig_variant
 from samba.ingest.rigs import BUILTIN_RIGS, DETECTED, RigMap, detect_rig, rig_of
 
 __all__ = [
@@ -22,6 +24,8 @@ __all__ = [
     "DETECTED",
     "PLUG_IN_GAIT",
     "POSE_TOPIC",
+    "RIG_CONVENTIONS",
+    "RIG_STRUCTURES",
     "SUBJECT_METADATA",
     "TAKE_METADATA",
     "BvhError",
@@ -54,4 +58,5 @@ __all__ = [
     "reference_joints",
     "resolve_humanoid",
     "rig_of",
+    "rig_variant",
 ]

@@ -1,7 +1,8 @@
 """Variants of a BVH rig as other tools write them: the same motion under other joint
 names, with extra twist and roll bones, position channels on every joint, bones laid
 along local X, or a dummy root above the hips. Every variant keeps every joint's world
-position in every frame, so an importer must give the same 13 joints from each."""
+position in every frame, so an importer must give the same 13 joints from each (the
+rig tests check it; `samba examples` writes a game-studio walk with them)."""
 
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ ROLES = (
     "LowerLeg",
     "Foot",
 )
-CONVENTIONS: dict[str, dict[str, str]] = {
+RIG_CONVENTIONS: dict[str, dict[str, str]] = {
     "blender": dict(
         zip(
             ROLES,
@@ -157,7 +158,7 @@ CONVENTIONS: dict[str, dict[str, str]] = {
     ),
 }
 """Joint names per convention, `{L}` / `{l}` / `{Left}` / `{left}` standing for the side."""
-STRUCTURES = ("twist and roll bones", "position channels", "bones along X", "dummy root")
+RIG_STRUCTURES = ("twist and roll bones", "position channels", "bones along X", "dummy root")
 
 
 @dataclass
@@ -171,11 +172,11 @@ class _Node:
     children: list[int] = field(default_factory=list)
 
 
-def variant(
+def rig_variant(
     bvh: BvhFile, convention: str, structures: tuple[str, ...] = (), frames: int = 40
 ) -> str:
     """BVH text of the first `frames` frames of `bvh` renamed after `convention` (a key of
-    `CONVENTIONS`, or "original") with the changes `structures` (of `STRUCTURES`)."""
+    `RIG_CONVENTIONS`, or "original") with the changes `structures` (of `RIG_STRUCTURES`)."""
     nodes = [
         _Node(
             j.name,
@@ -189,7 +190,7 @@ def variant(
     ]
     bones = resolve_humanoid(bvh.skeleton(), bvh.source).bones
     if convention != "original":
-        _rename(nodes, bones, CONVENTIONS[convention])
+        _rename(nodes, bones, RIG_CONVENTIONS[convention])
     if "twist and roll bones" in structures:
         _twists(nodes, bones)
     if "position channels" in structures:

@@ -66,7 +66,15 @@ from samba.ingest import (
 )
 from samba.ingest import cli as import_cli
 from samba.reconstruct import METHODS, method, reconstruction_kernels
-from samba.service.cli import capture_volume, demo, node, reconstruct, serve, track_video
+from samba.service.cli import (
+    capture_volume,
+    demo,
+    examples,
+    node,
+    reconstruct,
+    serve,
+    track_video,
+)
 
 
 def _register_db(parser: argparse.ArgumentParser) -> None:
@@ -392,6 +400,10 @@ AREAS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], str]] = {
     ),
     "serve": (serve.register, "live capture server: packets in; VMC, viewer, takes out"),
     "demo": (demo.register, "a live capture end to end: server, two camera nodes, take, export"),
+    "examples": (
+        examples.register,
+        "write the input files the README's and docs' examples run on into a folder",
+    ),
     "node": (
         node.register,
         "camera node: track the 8 markers (or, markerless, the body) in frames, send them by UDP",

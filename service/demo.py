@@ -87,7 +87,7 @@ def run_demo(settings: DemoSettings) -> int:
     (0). A motion or marker-set file that cannot be read, or a folder holding an earlier
     demo's files without `settings.force`, stops it before it makes anything (`C3dError`,
     `BvhError`, `InputError`, ...)."""
-    capture, motion_name = _capture(settings)
+    capture, motion_name = demo_capture(settings)
     folder = Path(settings.out_dir)
     if folder.exists() and not folder.is_dir():
         raise InputError(str(folder), "is a file; the demo keeps its files in a folder")
@@ -212,7 +212,7 @@ def _all_out(session: CaptureSession, frames: int) -> bool:
     return done >= frames
 
 
-def _capture(settings: DemoSettings) -> tuple[SyntheticCapture, str]:
+def demo_capture(settings: DemoSettings) -> tuple[SyntheticCapture, str]:
     """The motion the camera nodes play and its name: a built-in one (a seed the database
     never saw), a BVH file or a C3D file's real markers, `--seconds` of it."""
     if is_marker_file(settings.motion):

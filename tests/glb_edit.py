@@ -1,26 +1,11 @@
-"""Editing the JSON chunk of a .glb in tests (the binary chunk is kept as it is), and
-saving a .glb as JSON glTF."""
+"""Saving a .glb as JSON glTF in tests (`samba.export.glb_with_json` edits a .glb's JSON)."""
 
 from __future__ import annotations
 
 import base64
 import json
 import struct
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
-
-
-def with_json(glb: bytes, edit: Callable[[dict[str, Any]], None]) -> bytes:
-    """A .glb whose JSON chunk is `edit`ed in place (the binary chunk kept)."""
-    size = struct.unpack_from("<I", glb, 12)[0]
-    doc = json.loads(glb[20 : 20 + size])
-    edit(doc)
-    text = json.dumps(doc).encode()
-    text += b" " * (-len(text) % 4)
-    rest = glb[20 + size :]
-    head = struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(rest))
-    return head + struct.pack("<I4s", len(text), b"JSON") + text + rest
 
 
 def write_gltf(glb: bytes, path: Path, bin_name: str | None) -> None:

@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from glb_edit import with_json, write_gltf
+from glb_edit import write_gltf
 from pxr import Usd, UsdGeom, UsdSkel, Vt
 
 from samba.body.skeleton import Body
-from samba.export import usd_writer
+from samba.export import glb_with_json, usd_writer
 from samba.export.avatar_file import USD_SUFFIXES, read_avatar_rig
 from samba.export.errors import ExportError
 from samba.export.gltf_writer import write_glb
@@ -78,7 +78,7 @@ def test_mixamo_names_in_centimetres_under_a_scaled_root(tmp_path: Path, avatar_
             node["translation"] = [100.0 * c for c in node["translation"]]
         doc["nodes"][0]["scale"] = [0.01, 0.01, 0.01]
 
-    rig = read_avatar_rig(_saved(tmp_path, with_json(avatar_glb, mixamo)))
+    rig = read_avatar_rig(_saved(tmp_path, glb_with_json(avatar_glb, mixamo)))
     np.testing.assert_allclose(rig.rest, AVATAR_RIG.rest, atol=1e-5)
 
 
@@ -86,7 +86,7 @@ def test_an_avatar_scaled_to_nothing_is_refused(tmp_path: Path, avatar_glb: byte
     def flattened(doc: dict) -> None:
         doc["nodes"][0]["scale"] = [0.0, 0.0, 0.0]  # every bone of zero length
 
-    path = _saved(tmp_path, with_json(avatar_glb, flattened))
+    path = _saved(tmp_path, glb_with_json(avatar_glb, flattened))
     with pytest.raises(ExportError, match="joints all stand at one point") as caught:
         read_avatar_rig(path)
     assert str(path) in str(caught.value)
@@ -103,7 +103,7 @@ def test_vrm0_facing_minus_z_is_turned_to_face_plus_z(tmp_path: Path, avatar_glb
         ]
         doc["extensions"] = {"VRM": {"humanoid": {"humanBones": human}}}
 
-    rig = read_avatar_rig(_saved(tmp_path, with_json(avatar_glb, vrm0), "avatar.vrm"))
+    rig = read_avatar_rig(_saved(tmp_path, glb_with_json(avatar_glb, vrm0), "avatar.vrm"))
     np.testing.assert_allclose(rig.rest, AVATAR_RIG.rest, atol=1e-6)
 
 
@@ -118,7 +118,7 @@ def test_vrm1_table_and_optional_bones_filled_in(tmp_path: Path, avatar_glb: byt
         }
         doc["extensions"] = {"VRMC_vrm": {"humanoid": {"humanBones": human}}}
 
-    rig = read_avatar_rig(_saved(tmp_path, with_json(avatar_glb, vrm1)))
+    rig = read_avatar_rig(_saved(tmp_path, glb_with_json(avatar_glb, vrm1)))
     shoulders = (AVATAR_RIG.rest[BONE_INDEX["LeftUpperArm"]] + AVATAR_RIG.rest[8]) / 2
     np.testing.assert_allclose(rig.rest[BONE_INDEX["Neck"]], shoulders, atol=1e-6)
     hips = AVATAR_RIG.rest[0]
@@ -130,7 +130,7 @@ def test_a_vrm_table_naming_a_missing_node_says_which(tmp_path: Path, avatar_glb
         doc["extensions"] = {"VRMC_vrm": {"humanoid": {"humanBones": {"hips": {"node": 9999}}}}}
 
     with pytest.raises(ExportError, match="puts hips on node 9999 of"):
-        read_avatar_rig(_saved(tmp_path, with_json(avatar_glb, bad_hips)))
+        read_avatar_rig(_saved(tmp_path, glb_with_json(avatar_glb, bad_hips)))
 
 
 def test_a_take_on_the_avatar_keeps_directions_and_the_avatars_proportions(
@@ -155,7 +155,7 @@ def test_an_avatar_whose_left_bones_no_name_says_is_read_by_its_structure(
             if node.get("name", "").startswith("Left"):
                 node["name"] = "bone_" + node["name"][4:]
 
-    path = _saved(tmp_path, with_json(avatar_glb, rename))
+    path = _saved(tmp_path, glb_with_json(avatar_glb, rename))
     np.testing.assert_allclose(read_avatar_rig(path).rest, AVATAR_RIG.rest, atol=1e-6)
 
 
@@ -167,7 +167,7 @@ def test_an_avatar_that_is_no_humanoid_is_refused_saying_why(
             if node.get("name") in ("LeftUpperLeg", "RightUpperLeg"):
                 node["rotation"] = [-0.9238795, 0.0, 0.0, 0.3826834]  # 135 degrees about -X
 
-    path = _saved(tmp_path, with_json(avatar_glb, legs_forward))
+    path = _saved(tmp_path, glb_with_json(avatar_glb, legs_forward))
     with pytest.raises(ExportError) as e:
         read_avatar_rig(path)
     assert e.value.source == str(path)

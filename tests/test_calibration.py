@@ -1,9 +1,9 @@
 """Tests of board detection, camera calibration and `samba calibrate` on rendered boards.
 
-The scene (`board_render`): three 640x480 cameras about 3 m from the middle of the stage,
-two of them with lens distortion, film a 9x6 checkerboard of 8 cm squares lying on the
-floor (frame 0, corner 0 at the world origin) and then waved through the stage in 20
-poses (frames 1..20).
+The scene (`samba.cameras.board_render`): three 640x480 cameras about 3 m from the middle
+of the stage, two of them with lens distortion, film a 9x6 checkerboard of 8 cm squares
+lying on the floor (frame 0, corner 0 at the world origin) and then waved through the
+stage in 20 poses (frames 1..20).
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from board_render import board_poses, floor_pose, render_board, stage_cameras
 
 from samba.base.errors import InputError
+from samba.cameras import board_poses, floor_pose, render_board, stage_cameras
 from samba.cameras.calibration import MIN_VIEWS, calibrate, calibrate_intrinsics
 from samba.cameras.calibration_board import Board, BoardView, parse_board
 from samba.cameras.calibration_file import read_calibration

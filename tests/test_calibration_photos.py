@@ -4,7 +4,7 @@
 The real photos are the Pose2Sim lab session's (../shared/data/pose2sim): seven hand-held
 phone photos per camera of a 4 x 7 checkerboard of 6 cm squares, checked against the
 lab's own Qualisys calibration (`Calib.qca.txt`). The rest renders a 9x6 board
-(`board_render`) seen by one 640x480 camera with lens distortion.
+(`samba.cameras.board_render`) seen by one 640x480 camera with lens distortion.
 """
 
 from __future__ import annotations
@@ -16,10 +16,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from board_render import board_poses, render_board, stage_cameras
 from conftest import shared_data_dir
 
-from samba.cameras import read_calibration, write_calibration
+from samba.cameras import (
+    board_poses,
+    read_calibration,
+    render_board,
+    stage_cameras,
+    write_calibration,
+)
 from samba.cameras.calibration import calibrate_intrinsics
 from samba.cameras.calibration_board import Board, BoardView, parse_board
 from samba.cameras.camera import Camera, CameraGroup

@@ -18,9 +18,9 @@ import numpy as np
 import pygltflib as gltf
 import pytest
 from export_fixtures import box_mesh, real_takes, synthetic_motion
-from glb_edit import with_json
 
 from samba.body.take import Take
+from samba.export import glb_with_json
 from samba.export.avatar_mesh import AvatarMesh
 from samba.export.errors import ExportError
 from samba.export.gltf_reader import read_glb_joint_positions
@@ -304,14 +304,14 @@ CORRUPTIONS: dict[str, Callable[[bytes], bytes]] = {
     "truncated": lambda glb: glb[: len(glb) // 2],
     "version 1": lambda glb: glb[:4] + struct.pack("<I", 1) + glb[8:],
     "garbled JSON": lambda glb: glb[:20] + b"{]" + glb[22:],
-    "accessor out of range": lambda glb: with_json(
+    "accessor out of range": lambda glb: glb_with_json(
         glb, lambda doc: doc["animations"][0]["samplers"][0].update(output=999)
     ),
-    "view past the data": lambda glb: with_json(
+    "view past the data": lambda glb: glb_with_json(
         glb, lambda doc: doc["bufferViews"][-1].update(byteOffset=10**9)
     ),
-    "node cycle": lambda glb: with_json(glb, lambda doc: doc["nodes"][5].update(children=[0])),
-    "two parents": lambda glb: with_json(glb, lambda doc: doc["nodes"][5].update(children=[1])),
+    "node cycle": lambda glb: glb_with_json(glb, lambda doc: doc["nodes"][5].update(children=[0])),
+    "two parents": lambda glb: glb_with_json(glb, lambda doc: doc["nodes"][5].update(children=[1])),
 }
 
 

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rig_variants import CONVENTIONS, STRUCTURES, variant
 
 from samba.cli import main
+from samba.ingest import RIG_CONVENTIONS, RIG_STRUCTURES, rig_variant
 from samba.ingest.bvh import read_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.errors import RigError
@@ -18,9 +18,9 @@ from samba.ingest.rigs import RigMap
 
 RIGS = ("cgspeed_131_01", "iclone_002_01", "daz_salsa_01")
 VARIANTS = (
-    [(name, ()) for name in CONVENTIONS]
-    + [("game studio", (structure,)) for structure in STRUCTURES]
-    + [("game studio", STRUCTURES)]
+    [(name, ()) for name in RIG_CONVENTIONS]
+    + [("game studio", (structure,)) for structure in RIG_STRUCTURES]
+    + [("game studio", RIG_STRUCTURES)]
 )
 
 
@@ -30,11 +30,11 @@ def test_every_variant_of_a_shared_rig_imports_to_the_same_joints(
 ) -> None:
     bvh = read_bvh(cmu_dir / f"{rig}.bvh")
     original = tmp_path / "original.bvh"
-    original.write_text(variant(bvh, "original"))
+    original.write_text(rig_variant(bvh, "original"))
     expected = load_bvh_take(original).poses
     for convention, structures in VARIANTS:
         path = tmp_path / f"{convention}-{len(structures)}.bvh".replace(" ", "_")
-        path.write_text(variant(bvh, convention, structures))
+        path.write_text(rig_variant(bvh, convention, structures))
         take = load_bvh_take(path)  # a built-in table or the resolver ("detected")
         error = np.abs(take.poses - expected).max()
         assert error < 1e-3, (convention, structures, take.rig, error)
@@ -146,7 +146,7 @@ def test_db_rig_shows_the_mapping_and_writes_the_map_import_takes(
     """`samba db rig FILE --write-map OUT`: the game-studio rename of the Daz rig, its
     bones with their evidence; the written map imports the file as detection does."""
     path = tmp_path / "studio.bvh"
-    path.write_text(variant(read_bvh(cmu_dir / "daz_salsa_01.bvh"), "game studio"))
+    path.write_text(rig_variant(read_bvh(cmu_dir / "daz_salsa_01.bvh"), "game studio"))
     mapping = tmp_path / "studio.toml"
     assert main(["db", "rig", str(path), "--write-map", str(mapping)]) == 0
     out = capsys.readouterr().out

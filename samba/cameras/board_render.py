@@ -1,13 +1,14 @@
-"""Synthetic images of a calibration board for the calibration tests.
+"""Synthetic images of a calibration board: the calibration tests' scenes and the board
+photos `samba examples` writes.
 
 `render_board` draws a `Board` lying in a known pose into a known camera's image: every
 (supersampled) output pixel is undistorted with the camera's lens model
 (`Camera.undistort`), taken to the board plane by the inverse of the plane's homography
 and looked up in the board's texture (`cv2.remap`); the image is then averaged down,
 blurred slightly and given sensor noise. `stage_cameras`, `board_poses` and
-`floor_pose` build the scene the tests calibrate: cameras around a capture volume, a
-board waved through it facing them, and the board lying on the floor with corner 0 at
-the world origin.
+`floor_pose` build the scene calibrated there: cameras around a capture volume, a board
+waved through it facing them, and the board lying on the floor with corner 0 at the
+world origin. Lengths are meters, images 640x480 grey uint8.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ from samba.volume.carving import Frames, carve_streams, learn_extractors
 from samba.volume.floor_coverage import capture_region
 from samba.volume.frame_kinematics import HUMAN_END_BRANCHES
 from samba.volume.humanoid import humanoid_joints, walked_direction
-from samba.volume.visual_hull import VisualHull
+from samba.volume.visual_hull import VisualHull, volume_cameras
 from samba.volume.voxel_grid import VoxelGrid
 
 __all__ = [
@@ -24,5 +24,6 @@ __all__ = [
     "carve_streams",
     "humanoid_joints",
     "learn_extractors",
+    "volume_cameras",
     "walked_direction",
 ]
