@@ -60,7 +60,13 @@ from samba.export import (
 )
 from samba.ingest import RIG_STRUCTURES, read_bvh, rig_variant
 from samba.service.demo import DemoSettings, demo_capture
-from samba.silhouette import SilhouetteView, person_frames, stage_background, staged
+from samba.silhouette import (
+    SilhouetteView,
+    empty_stage_frames,
+    person_frames,
+    stage_background,
+    staged,
+)
 from samba.synthetic import generate
 from samba.volume import VoxelGrid, volume_cameras
 
@@ -178,10 +184,11 @@ def _stage(root: Path) -> list[tuple[Path, str]]:
     background = stage_background(front.size, rng)
     frames = person_frames(wave, front, subject, background, rng)
     written.append((_images(root / "wave", frames), f"front camera: a wave, {WAVE_FPS:g} fps"))
-    written.append((_images(root / "empty", _empty(background, 8, rng)), "its empty stage"))
+    empty = empty_stage_frames(background, 8, rng)
+    written.append((_images(root / "empty", empty), "its empty stage"))
     for camera in cameras:
         background = stage_background(camera.size, rng)
-        empty = _empty(background, EMPTY_FRAMES, rng)
+        empty = empty_stage_frames(background, EMPTY_FRAMES, rng)
         frames = person_frames(jacks, camera, body, background, rng)
         _images(root / "jacks" / camera.name, np.concatenate([empty, frames]))
     written.append(
@@ -212,12 +219,6 @@ def _avatar(root: Path) -> list[tuple[Path, str]]:
 def _keys(root: Path) -> list[tuple[Path, str]]:
     write_text_atomic(root / "keys.toml", KEYS_TOML)
     return [(root / "keys.toml", "which node key signs for which camera (LAN example)")]
-
-
-def _empty(background: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
-    """`count` frames (count, H, W, 3) uint8 of `background` with sensor noise."""
-    noise = rng.normal(0.0, 3.0, (count, *background.shape))
-    return np.clip(background + noise, 0, 255).astype(np.uint8)
 
 
 def _images(folder: Path, frames: np.ndarray | list[np.ndarray], prefix: str = "") -> Path:

@@ -20,7 +20,7 @@ from samba.body.body_model import BodyModel
 from samba.cameras.calibration_file import write_calibration
 from samba.cameras.camera import Camera, CameraGroup
 from samba.silhouette.evaluation import staged
-from samba.silhouette.person_render import person_frames, stage_background
+from samba.silhouette.person_render import empty_stage_frames, person_frames, stage_background
 from samba.silhouette.view import SilhouetteView
 from samba.synthetic.motions import generate
 
@@ -64,8 +64,7 @@ def footage(motion: str = "wave", seconds: float = 3.0, seed: int = 202) -> Foot
     rng = np.random.default_rng(seed)
     background = stage_background(CAMERA.size, rng)
     frames = person_frames(truth, CAMERA, BODY, background, rng, noise=SENSOR_NOISE)
-    noise = rng.normal(0.0, SENSOR_NOISE, (EMPTY_FRAMES, *background.shape))
-    empty = np.clip(background + noise, 0, 255).astype(np.uint8)
+    empty = empty_stage_frames(background, EMPTY_FRAMES, rng, SENSOR_NOISE)
     return Footage(truth, frames, empty)
 
 

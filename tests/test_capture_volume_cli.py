@@ -18,7 +18,7 @@ from samba.body.body_model import BodyModel, scaled_to
 from samba.cameras.calibration_file import read_calibration, write_calibration
 from samba.cameras.camera import Camera
 from samba.ingest.bvh import read_bvh
-from samba.silhouette.person_render import person_frames, stage_background
+from samba.silhouette.person_render import empty_stage_frames, person_frames, stage_background
 from samba.synthetic.motions import generate
 from samba.volume.visual_hull import volume_cameras
 from samba.volume.voxel_grid import VoxelGrid
@@ -59,18 +59,12 @@ class Stage:
     facing: tuple[float, float]
 
 
-def _empty_stage(background: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
-    """`count` frames (count, H, W, 3) uint8 of `background` with sensor noise."""
-    noise = rng.normal(0.0, SENSOR_NOISE, (count, *background.shape))
-    return np.clip(background + noise, 0, 255).astype(np.uint8)
-
-
 def _pole_frames(camera: Camera, background: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """`POLE_FRAMES` frames of the red `POLE` standing still in front of `background`."""
     corners = np.stack(np.meshgrid(*POLE.T, indexing="ij"), -1).reshape(-1, 3)
     outline = cv2.convexHull(np.round(camera.project(corners)).astype(np.int32))
     frame = cv2.fillConvexPoly(background.copy(), outline, (40, 60, 150))
-    return _empty_stage(frame, POLE_FRAMES, rng)
+    return empty_stage_frames(frame, POLE_FRAMES, rng, SENSOR_NOISE)
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +83,7 @@ def stage(tmp_path_factory: pytest.TempPathFactory) -> Stage:
     videos, pole, empty = [], [], []
     for camera in cameras:
         background = stage_background(camera.size, rng)
-        before = _empty_stage(background, EMPTY_FRAMES, rng)
+        before = empty_stage_frames(background, EMPTY_FRAMES, rng, SENSOR_NOISE)
         frames = person_frames(truth, camera, body, background, rng, SENSOR_NOISE)
         folder = root / camera.name
         videos.append(write_image_folder(folder / "jacks", np.concatenate([before, frames])))

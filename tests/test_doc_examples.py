@@ -10,7 +10,8 @@ its block ends the other background commands are waited for, then each server st
 with Ctrl-C (SIGINT). A `NAME=value` line sets NAME for the commands after it. Every
 command must exit with the status its page shows (`doc_examples.Command.status`), and an
 error it shows must name the same input. Blocks that read the real data are skipped when
-it is absent, with the blocks of their group after them; `SKIPPED_BLOCKS` says why the
+it is absent, and so are the later blocks that name a path a skipped block named, unless
+`samba examples` wrote it (`mocap-db`, not `store`); `SKIPPED_BLOCKS` says why the
 others that do not run here do not.
 """
 
@@ -34,6 +35,8 @@ from pathlib import Path
 import pytest
 from conftest import shared_data_dir
 from doc_examples import Block, Command, page_blocks
+
+from samba.service.examples import EXAMPLE_FILES
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -214,26 +217,47 @@ def test_every_command_example_runs_as_printed(
     env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
     env["PYTHONUNBUFFERED"] = "1"
     runner = _Runner(folder, env)
-    skipped: list[str] = []
+    plan = _plan(group, {path.name for path in examples_dir.iterdir()}, data is not None)
     with _one_server_at_a_time(group):
-        for page in group:
-            for block in page_blocks(ROOT / page, page):
-                reason = SKIPPED_BLOCKS.get((page, block.commands[0].text))
-                if reason is None and data is None and "shared/data" in _text(block):
-                    reason = "needs the real data in ../shared/data (or $SAMBA_DATA)"
-                if reason is None and skipped and data is None:
-                    reason = "goes on from a block skipped before it"
-                if reason is not None:
-                    skipped.append(f"{block.name}: {reason}")
-                    continue
+        for block, reason in plan:
+            if reason is None:
                 runner.block(block)
     assert not runner.failures, "\n".join(runner.failures)
+    skipped = [f"{block.name}: {reason}" for block, reason in plan if reason is not None]
     if skipped:
         pytest.skip("; ".join(skipped))
 
 
+def _plan(
+    group: tuple[str, ...], given: set[str], with_data: bool
+) -> list[tuple[Block, str | None]]:
+    """The blocks of `group`'s pages in order, each with why it is skipped (None: it
+    runs) when the example folder holds `given` and the real data is there or not."""
+    plan: list[tuple[Block, str | None]] = []
+    unmade: set[str] = set()  # paths the skipped blocks name, and so may have made
+    for page in group:
+        for block in page_blocks(ROOT / page, page):
+            reason = SKIPPED_BLOCKS.get((page, block.commands[0].text))
+            if reason is None and not with_data and "shared/data" in _text(block):
+                reason = "needs the real data in ../shared/data (or $SAMBA_DATA)"
+            missing = sorted(p for p in _paths(block) & unmade if p not in given)
+            if reason is None and missing:
+                reason = f"reads {missing[0]}, which a block skipped before it makes"
+            if reason is not None:
+                unmade |= {p for p in _paths(block) if "shared/data" not in p}
+            plan.append((block, reason))
+    return plan
+
+
 def _text(block: Block) -> str:
     return "\n".join(command.text for command in block.commands)
+
+
+def _paths(block: Block) -> set[str]:
+    """The words of the block's commands that look like paths (a dot, a dash or a slash
+    in them; not a flag)."""
+    words = (word for command in block.commands for word in command.text.split())
+    return {w.rstrip("/") for w in words if re.search(r"[./-]", w) and not w.startswith("-")}
 
 
 def test_the_examples_are_found() -> None:
@@ -245,3 +269,18 @@ def test_the_examples_are_found() -> None:
     errors = [c for b in page_blocks(ROOT / "docs/export.md", "e") for c in b.commands]
     assert {c.status for c in errors} == {0, 1}
     assert "nothere.vrm" in {c.error_source for c in errors}
+
+
+def test_without_the_data_only_what_needs_it_is_skipped() -> None:
+    plan = _plan(("README.md",), set(EXAMPLE_FILES), with_data=False)
+    running = [c.text for block, reason in plan if reason is None for c in block.commands]
+    reasons = {reason for _, reason in plan} - {None}
+    assert any(text.startswith("samba calibrate left middle right") for text in running)
+    assert any(text.startswith("samba track-video wave/") for text in running)
+    assert not any("shared/data" in text or "mocap-db" in text for text in running)
+    assert reasons == {
+        "needs the real data in ../shared/data (or $SAMBA_DATA)",
+        "reads mocap-db, which a block skipped before it makes",
+    }
+    with_data = _plan(("README.md",), set(EXAMPLE_FILES), with_data=True)
+    assert all(reason is None for _, reason in with_data)

@@ -7,7 +7,7 @@ from them, and the tree-based Bayesian tracker.
 from samba.silhouette.distance import downsampled
 from samba.silhouette.evaluation import staged
 from samba.silhouette.extraction import BACKGROUND_METHODS, SilhouetteExtractor
-from samba.silhouette.person_render import person_frames, stage_background
+from samba.silhouette.person_render import empty_stage_frames, person_frames, stage_background
 from samba.silhouette.person_segmentation import PersonSegmenter, SegmenterError
 from samba.silhouette.render import noisy_silhouettes, render_silhouettes
 from samba.silhouette.runs import SilhouetteRuns
@@ -26,6 +26,7 @@ __all__ = [
     "SilhouetteView",
     "TreeLevel",
     "downsampled",
+    "empty_stage_frames",
     "noisy_silhouettes",
     "person_frames",
     "render_silhouettes",

@@ -42,6 +42,15 @@ def stage_background(size: tuple[int, int], rng: np.random.Generator) -> np.ndar
     return np.clip(wall, 0, 255).astype(np.uint8)
 
 
+def empty_stage_frames(
+    background: np.ndarray, count: int, rng: np.random.Generator, noise: float = 3.0
+) -> np.ndarray:
+    """`count` frames (count, H, W, 3) uint8 of the empty stage `background` (H, W, 3)
+    uint8, each with Gaussian sensor noise of `noise` grey levels."""
+    grain = rng.normal(0.0, noise, (count, *background.shape))
+    return np.clip(background + grain, 0, 255).astype(np.uint8)
+
+
 def person_frames(
     poses: np.ndarray,
     camera: Camera,
