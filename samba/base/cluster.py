@@ -4,8 +4,9 @@ one task per item with the outcomes handed back in item order.
 
 Dask is an optional extra (`samba-mocap[cluster]`), imported only here and only when one
 of the flags is given: a command without them starts as fast as before and runs in its own
-process. A task whose worker dies is run once more on another worker; if that worker
-dies too its outcome is a `WorkerDeathError` (`SCHEDULER_SETTINGS`).
+process. A task whose worker dies is run once more on another worker
+(`SCHEDULER_SETTINGS`); if that worker dies too, the items of the task are run again
+one by one, and an item that kills its worker twice has a `WorkerDeathError` for outcome.
 """
 
 from __future__ import annotations
@@ -155,9 +156,10 @@ def outcomes_in_order(
             while following in finished:
                 yield items[following], finished.pop(following)
                 following += 1
-    finally:
+    finally:  # also when the caller stops early, maybe after the client has closed
         bar.close()
-        client.cancel(list(pending))
+        if pending and client.status == "running":
+            client.cancel(list(pending))
 
 
 def _run_group(task: Callable[..., Any], group: Sequence[Any], *shared: Any) -> list[Any]:

@@ -33,11 +33,17 @@ def kernels_enabled() -> bool:
 
 
 def usable_cores() -> int:
-    """The CPU cores this process may run on (its affinity where the OS has one): how many
-    threads a batch of compiled-kernel work is split over."""
+    """The CPU cores this process may run on (its affinity where the OS has one), at most
+    `OMP_NUM_THREADS` when that is set (Dask sets it to 1 in its workers, one per core):
+    how many threads a batch of compiled-kernel work is split over."""
     if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
+        cores = len(os.sched_getaffinity(0))
+    else:
+        cores = os.cpu_count() or 1
+    limit = os.environ.get("OMP_NUM_THREADS", "")
+    if limit.isdigit() and int(limit) > 0:
+        return min(cores, int(limit))
+    return cores
 
 
 def compiled(function: Callable | None = None, *, reassociate: bool = False) -> Callable:
