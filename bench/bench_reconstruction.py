@@ -155,7 +155,7 @@ def main() -> None:
     """Command line entry."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=2000, help="test frames (default 2000)")
-    parser.add_argument("--methods", default="nn,chai,samba,best", help="comma-separated")
+    parser.add_argument("--methods", default=",".join(METHODS), help="comma-separated")
     parser.add_argument(
         "--paths",
         default="kernels,numpy",
