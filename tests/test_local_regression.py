@@ -1,8 +1,9 @@
 """The joints no marker sees (issue 44): on a real CMU salsa take reconstructed from a
 database of eight other real takes, the local linear regression (`lwr`) puts the head,
 elbows and hips closer than `best`, and smoothing them over the frames (`smoothed`)
-closer still, clean and with 10% of the markers dropped, leaving the marker joints as
-they were; `calibrated` holds the thighs to one length after the first 3 s."""
+closer still, clean and with 10% of the markers dropped, the marker joints no worse;
+`calibrated` holds the thighs to one length after the first 3 s; a following hold
+carries a lost marker along with the markers seen."""
 
 from __future__ import annotations
 
@@ -11,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from samba.body import MARKER_JOINTS, UNOBSERVED_JOINTS, mirror_poses
+from samba.body import MARKER_JOINTS, UNOBSERVED_JOINTS, markers_of, mirror_poses, standard_pose
 from samba.db import PoseIndex
 from samba.evaluation.protocol import capture_take, tibia_scale
 from samba.ingest import load_bvh_take
-from samba.reconstruct import method
+from samba.reconstruct import MarkerHold, method
 
 TEST_TAKE = "daz_salsa_04"
 DATABASE = (
@@ -60,14 +61,15 @@ def test_lwr_places_the_unobserved_joints_closer_than_best(salsa, dropout: float
     lwr = joint_errors_cm("lwr", truth, index, dropout)
     smoothed = joint_errors_cm("smoothed", truth, index, dropout)
     unobserved = list(UNOBSERVED_JOINTS)
-    # Measured: best 2.66, lwr 2.54, smoothed 2.47 cm clean; 2.86, 2.75, 2.66 with dropout.
+    # Measured: best 2.66, lwr 2.55, smoothed 2.48 cm clean; 2.86, 2.75, 2.59 with dropout.
     assert lwr[:, unobserved].mean() < best[:, unobserved].mean() - 0.08
     assert lwr[:, HIPS].mean() < best[:, HIPS].mean() - 0.15
     assert smoothed[:, unobserved].mean() < lwr[:, unobserved].mean() - 0.05
     assert smoothed[:, unobserved].mean() < 2.8
     markers = list(MARKER_JOINTS)
-    for errors in (lwr, smoothed):
-        assert abs(errors[:, markers].mean() - best[:, markers].mean()) < 0.01
+    assert abs(lwr[:, markers].mean() - best[:, markers].mean()) < 0.01
+    # smoothed's held markers move with the body: its marker joints gain under dropout.
+    assert smoothed[:, markers].mean() < best[:, markers].mean() + 0.01
 
 
 @pytest.mark.slow
@@ -79,3 +81,14 @@ def test_calibrated_thighs_keep_one_length_after_three_seconds(salsa) -> None:
     assert np.ptp(thighs[90:], axis=0).max() < 1e-9
     # Measured: 36.6 cm for thighs of 36.8 cm.
     assert np.abs(thighs[90] - true_thighs).max() < 0.01
+
+
+def test_a_following_hold_moves_a_lost_marker_with_the_body() -> None:
+    # Every marker walks 2 cm a frame along +X; the left wrist is lost in frames 2 and 3.
+    walk = np.arange(4)[:, None, None] * np.array([0.02, 0.0, 0.0])
+    frames = markers_of(standard_pose())[None] + walk
+    frames[2:, 2] = np.nan
+    still = MarkerHold(10).fill(frames)
+    follows = MarkerHold(10, follows=True).fill(frames)
+    np.testing.assert_allclose(still[2:, 2], np.repeat(still[1:2, 2], 2, axis=0))
+    np.testing.assert_allclose(follows[2:, 2], markers_of(standard_pose())[2] + walk[2:, 0])

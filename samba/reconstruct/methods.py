@@ -8,7 +8,7 @@
 | `best` | our best configuration (see `BEST`) |
 | `lwr` | `best` with each part's joints by a local linear regression (see `LWR`) |
 | `calibrated` | `lwr` with the subject's thighs and neck calibrated (see `CALIBRATED`) |
-| `smoothed` | `calibrated` with the unobserved joints smoothed over frames (see `SMOOTHED`) |
+| `smoothed` | `calibrated`, unobserved joints smoothed, held markers moving (see `SMOOTHED`) |
 """
 
 from __future__ import annotations
@@ -50,9 +50,10 @@ for 0.06-0.15 ms more per frame, 64 put 0.02 cm on them."""
 CALIBRATED = replace(LWR, calibration_frames=90)
 """`lwr` with the subject's thighs and neck calibrated over the first 90 frames (3 s) of
 a take (`samba.reconstruct.bone_calibration`)."""
-SMOOTHED = replace(CALIBRATED, joint_smoothing=0.75)
+SMOOTHED = replace(CALIBRATED, joint_smoothing=0.75, hold_follows=True)
 """`calibrated` with the head, elbows and hips smoothed over the frames, 0.75 on the newest
-(`samba.reconstruct.joint_smoothing`)."""
+(`samba.reconstruct.joint_smoothing`), and a lost marker held where the markers seen
+carry it (`samba.reconstruct.marker_hold`)."""
 
 
 @dataclass(frozen=True)

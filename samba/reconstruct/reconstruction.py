@@ -82,8 +82,9 @@ class ReconstructionConfig:
     holds a missing marker at its last observation for up to that many frames
     (`samba.reconstruct.marker_hold`) in frames that the markers seen make usable;
     markers held count for the solve but not for `markers_used`, the residual or the
-    confidence. `calibration_frames` > 0 calibrates the thighs and the neck over that many
-    first reconstructed frames of a take and holds them to it
+    confidence; with `hold_follows` a held marker moves with the markers seen.
+    `calibration_frames` > 0 calibrates the thighs and the neck over that many first
+    reconstructed frames of a take and holds them to it
     (`samba.reconstruct.bone_calibration`). `joint_smoothing` < 1 smooths the head, elbows
     and hips over the frames with that weight on the newest
     (`samba.reconstruct.joint_smoothing`); 1 leaves them as estimated.
@@ -107,6 +108,7 @@ class ReconstructionConfig:
     min_bandwidth: float = 0.005
     shoulder_origin: bool = True
     hold_frames: int = 10
+    hold_follows: bool = False
     calibration_frames: int = 0
     joint_smoothing: float = 1.0
 
@@ -207,7 +209,7 @@ class Reconstructor:
             self.config.k, self.config.n, self.config.noise_deg, self.config.seed
         )
         self._history: list[np.ndarray] = []
-        self._held = MarkerHold(self.config.hold_frames)
+        self._held = MarkerHold(self.config.hold_frames, self.config.hold_follows)
         self._calibration = BoneCalibration(self.config.calibration_frames)
         self._smoothing = JointSmoothing(self.config.joint_smoothing)
         if kernels_enabled():
