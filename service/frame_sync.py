@@ -11,7 +11,15 @@ themselves: every packet gives `arrival - timestamp` = true offset + its transpo
 and the estimate is the minimum of that over the camera's packets that arrived in the last
 `clock_window_s` seconds (a sliding minimum over a monotonic deque, amortised O(1) a
 packet). The packet with the least delay pins the offset, so jitter does not move it, and
-the window lets it follow clock drift. A packet's aligned time is `timestamp + offset`:
+the window lets it follow clock drift. The estimate falls at once to a lower minimum, but
+rises towards a higher one by at most `clock_rise` seconds per second of arrivals (default
+`CLOCK_RISE`, ten times the drift of a poor crystal clock): when a node falls behind (a
+busy machine, a stall) its packets queue and every delay in the window grows, but its
+clock has not moved, and a step in the estimate would step its frames' times (a recorded
+take would show a gap of dropped frames that were never dropped, and a node catching up
+would have its backlog dropped as late). A node clock stepped back within one run is
+followed at that rate; a node that restarts is picked up at once (`restart`).
+A packet's aligned time is `timestamp + offset`:
 its capture time on the server's clock, late by the camera's minimum transport delay.
 Cameras whose minimum delays differ by a constant therefore look shifted by that
 difference, which must stay well below `tolerance_s` (on a LAN it is well under 1 ms). The
@@ -63,6 +71,10 @@ RECENT_PACKETS = 256
 """(sequence, timestamp) pairs remembered per camera to spot duplicates and restarts."""
 DEFAULT_TOLERANCE_FRAMES = 0.4
 """Default `tolerance_s` in frame periods (0.4 / fps)."""
+CLOCK_RISE = 0.001
+"""Default `clock_rise`: the fastest a camera's clock offset estimate rises, seconds per
+second of arrivals (1000 ppm: ten times a poor crystal clock's drift, twice NTP's largest
+slew; 2 ms over the default 2 s window, well inside `tolerance_s` at 60 fps)."""
 _MAX_CAMERA_ID = 0xFFFF
 
 
@@ -123,11 +135,16 @@ class _Camera:
     def __init__(self) -> None:
         self.recent: OrderedDict[int, float] = OrderedDict()
         self.clock: deque[tuple[float, float]] = deque()
+        self.estimate: float | None = None
+        """The clock offset estimate (s) as of the last packet; None before the first."""
+        self.estimated_at = -math.inf
+        """Arrival time (s) of the packet the estimate was made at."""
 
     def forget(self) -> None:
-        """Drop the history and clock window, as after a restart."""
+        """Drop the history, clock window and estimate, as after a restart."""
         self.recent.clear()
         self.clock.clear()
+        self.estimate = None
 
     def remember(self, packet: Packet) -> None:
         """Record the packet's (sequence, timestamp)."""
@@ -135,8 +152,10 @@ class _Camera:
         if len(self.recent) > RECENT_PACKETS:
             self.recent.popitem(last=False)
 
-    def offset(self, timestamp: float, arrival: float, window_s: float) -> float:
-        """Add the sample `arrival - timestamp` (s) and return the window's minimum (s)."""
+    def offset(self, timestamp: float, arrival: float, window_s: float, rise: float) -> float:
+        """Add the sample `arrival - timestamp` (s) and return the new estimate (s): the
+        window's minimum, or the last estimate raised by `rise` (s per s) times the
+        seconds since, whichever is lower."""
         sample = arrival - timestamp
         clock = self.clock
         while clock and clock[-1][1] >= sample:
@@ -144,7 +163,11 @@ class _Camera:
         clock.append((arrival, sample))
         while len(clock) > 1 and clock[0][0] <= arrival - window_s:
             clock.popleft()
-        return clock[0][1]
+        lowest = clock[0][1]
+        if self.estimate is not None and lowest > self.estimate:
+            lowest = min(lowest, self.estimate + rise * max(0.0, arrival - self.estimated_at))
+        self.estimate, self.estimated_at = lowest, arrival
+        return lowest
 
 
 class FrameSync:
@@ -155,7 +178,8 @@ class FrameSync:
     first packet arrived, `tolerance_s` the largest difference (s) between aligned times
     in one frame (default 0.4 / fps), `min_cameras` the fewest cameras a frame is emitted
     with, `clock_window_s` the span (s) of arrivals the clock offsets are estimated over,
-    and `max_open` the most frames kept open. Invalid values raise `ValueError`.
+    `clock_rise` the fastest (s per s) an estimate rises, and `max_open` the most frames
+    kept open. Invalid values raise `ValueError`.
     """
 
     def __init__(
@@ -167,6 +191,7 @@ class FrameSync:
         tolerance_s: float | None = None,
         min_cameras: int = 2,
         clock_window_s: float = 2.0,
+        clock_rise: float = CLOCK_RISE,
         max_open: int = 64,
     ) -> None:
         ids = list(cameras)
@@ -189,6 +214,8 @@ class FrameSync:
                 f"(the number of cameras)"
             )
         _check_positive("clock_window_s", clock_window_s)
+        if not _is_real(clock_rise) or not math.isfinite(clock_rise) or clock_rise < 0:
+            raise ValueError(f"clock_rise {clock_rise!r} is not a finite number of s per s >= 0")
         if not _is_int(max_open) or max_open < 1:
             raise ValueError(f"max_open {max_open!r} is not an integer >= 1")
         self._cameras = {camera: _Camera() for camera in ids}
@@ -196,6 +223,7 @@ class FrameSync:
         self._tolerance_s = float(tolerance_s)
         self._min_cameras = min_cameras
         self._clock_window_s = float(clock_window_s)
+        self._clock_rise = float(clock_rise)
         self._max_open = max_open
         self._open: list[_OpenFrame] = []
         self._last_time = -math.inf
@@ -224,7 +252,8 @@ class FrameSync:
                 counts.conflicts += 1
             return []
         camera.remember(packet)
-        aligned = packet.timestamp + camera.offset(packet.timestamp, arrival, self._clock_window_s)
+        offset = camera.offset(packet.timestamp, arrival, self._clock_window_s, self._clock_rise)
+        aligned = packet.timestamp + offset
         if aligned <= self._last_time + self._tolerance_s:
             counts.late += 1
             return []
@@ -261,13 +290,14 @@ class FrameSync:
     def clock_offset(self, camera: int) -> float | None:
         """Camera `camera`'s clock offset estimate in seconds (server time = node time + it).
 
-        The minimum over the window as of the camera's last packet; None before its first
-        packet. `ValueError` for an id that is not one of the cameras.
+        The estimate made at the camera's last packet (the minimum over the window, risen
+        at most `clock_rise` per second); None before its first packet. `ValueError` for an
+        id that is not one of the cameras.
         """
         state = self._cameras.get(camera)
         if state is None:
             raise ValueError(f"camera {camera!r} is not one of the synced cameras")
-        return state.clock[0][1] if state.clock else None
+        return state.estimate
 
     def _place(self, member: _Member) -> list[SyncedFrame]:
         """Put an aligned, in-time packet into its frame and emit what that resolves."""

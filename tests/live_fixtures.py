@@ -32,6 +32,11 @@ WAIT_MS = 2000.0
 """How long a test session's frames wait for a late camera (ms). Far above any stall a
 busy machine causes, so tests that count every frame hold beside other work; on
 loopback nothing is lost, so no frame waits that long (a stage's default is 50)."""
+MAX_SKEW_S = 60.0
+"""How far (s) a test server lets a packet's capture time lag its arrival. A node that
+computes its frames (the markerless node) falls behind a real-time feed on a busy
+machine, seconds by the end of a 3 s take; the default window (5 s) would drop its
+last packets as off clock."""
 
 
 def config(calibration: Path, store: Path, **changes: object) -> SessionConfig:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from live_fixtures import VmcReceiver, until
+from live_fixtures import MAX_SKEW_S, VmcReceiver, until
 from markerless_fixtures import (
     BODY,
     CAMERA,
@@ -104,7 +104,7 @@ def test_a_poses_session_streams_and_records_the_markerless_node(
     async def run() -> tuple[dict, list[np.ndarray]]:
         config = poses_config(vmc=[vmc.target], fps=FPS)
         bind = {"udp": ("127.0.0.1", 0), "http": None, "workers": workers}
-        async with LiveServer([config], tmp_path / "takes", **bind) as live:
+        async with LiveServer([config], tmp_path / "takes", max_skew_s=MAX_SKEW_S, **bind) as live:
             assert live.server is not None
             session = live.server.session(SESSION)
             session.start_take("wave")
@@ -123,6 +123,7 @@ def test_a_poses_session_streams_and_records_the_markerless_node(
     assert metrics["sessions"][SESSION]["frames_out"] == frames
     assert metrics["dropped"]["total"] == 0
     take = read_take(tmp_path / "takes" / SESSION / "wave.mcap")
+    assert take.warnings == []  # frames one period apart on the node's clock: none resampled
     np.testing.assert_allclose(take.poses, np.array(sent), atol=1e-6)  # float32 on the wire
     assert mpjpe_cm(take.poses, shot.truth).mean() < 12.0
     vmc.drain()
