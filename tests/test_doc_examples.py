@@ -160,7 +160,9 @@ class _Runner:
                 running.process.kill()
                 status = running.process.wait()
             running.ready.wait(10.0)
-            self._check(block, running.command, status, "".join(running.lines))
+            output = "".join(running.lines)
+            print(f"`{running.command.text}` exited {status}:\n{output}")  # shown on failure
+            self._check(block, running.command, status, output)
 
     def _check(self, block: Block, command: Command, status: int, output: str) -> None:
         if status != command.status:

@@ -168,7 +168,7 @@ def register(parser: argparse.ArgumentParser) -> None:
         "captured at "
         f"T + i / fps (default: {START_DELAY_SECONDS:g} s after the node is ready). Nodes "
         "given the same motion, seed and T film the same instants, e.g. T=$(( $(date +%%s) "
-        "+ 5 ))",
+        "+ 10 ))",
     )
     add_marker_set_argument(synthetic)
     subject = parser.add_argument_group(
@@ -335,7 +335,7 @@ def _check_ahead(start_at: float, launched: float, now: float) -> None:
         raise InputError(
             f"--start-at {start_at:.1f}",
             f"is {now - start_at:,.1f} s in the past (every frame would be late); give a time "
-            "ahead of the clock, e.g. T=$(( $(date +%s) + 5 ))",
+            "ahead of the clock, e.g. T=$(( $(date +%s) + 10 ))",
         )
 
 
