@@ -92,8 +92,8 @@ class ReconstructionConfig:
 
     k: int = 10
     n: int = 10
-    noise_deg: float = 10.0
-    variance_kept: float = 0.9995
+    noise_deg: float = 12.0
+    variance_kept: float = 0.9999
     variance_floor: float = 1e-6
     marker_sigma: float = 0.005
     smooth_sigma: float = 0.08
