@@ -32,8 +32,12 @@ Matching. A packet joins the open frame whose reference time (its first packet's
 time) is within `tolerance_s` of the packet's aligned time and which has no packet of that
 camera yet; if every such frame already has one, the packet is a duplicate (same sequence
 and timestamp) or a conflict (another packet) and is dropped. A packet aligned at or
-before the last resolved frame's time + `tolerance_s` is late and dropped. Otherwise it
-opens a new frame.
+before the last resolved frame's time + `tolerance_s` is late and dropped, unless its
+capture is newer than that frame by more than `tolerance_s` on its own node's clock (the
+frame's time less the camera's offset estimate when the frame was resolved): then the
+estimate has fallen since (a quicker packet showed the first ones were delayed, as when
+a node's first packet is late and the next goes out right behind it), and the packet is
+a new capture, not a late one. Otherwise it opens a new frame.
 
 Emission. Frames are ordered by reference time ("older" means earlier) and emitted in that
 order. A frame that gets every camera is emitted at once when every older open frame has
@@ -42,9 +46,11 @@ still completes its own frame. `expire` resolves each frame whose first packet a
 `wait_s` ago or earlier, with every older one, and then the complete frames behind them;
 the oldest are also resolved when more than `max_open` are open. Resolving emits a
 frame with at least `min_cameras` cameras and counts the others as skipped. A member
-aligned at or before the previous resolved frame's time + `tolerance_s` (possible when
-the clock estimate moved, or packets crowded between two frames, while the frame was
-open) is late and removed first, which keeps emitted times strictly increasing.
+late by the same rule against the previous resolved frame (possible when the clock
+estimate moved, or packets crowded between two frames, while the frame was open) is
+removed first; a frame whose time would not come after the previous one's (new captures
+aligned early by an estimate that has fallen since) gets that time + `MIN_STEP_S`, which
+keeps emitted times strictly increasing.
 
 Duplicates and restarts. The last `RECENT_PACKETS` (sequence, timestamp) pairs of each
 camera identify duplicates, even of packets whose frame is already out; a packet with
@@ -75,6 +81,8 @@ CLOCK_RISE = 0.001
 """Default `clock_rise`: the fastest a camera's clock offset estimate rises, seconds per
 second of arrivals (1000 ppm: ten times a poor crystal clock's drift, twice NTP's largest
 slew; 2 ms over the default 2 s window, well inside `tolerance_s` at 60 fps)."""
+MIN_STEP_S = 1e-6
+"""Least step (s) between the times of two emitted frames."""
 _MAX_CAMERA_ID = 0xFFFF
 
 
@@ -83,9 +91,10 @@ class SyncedFrame:
     """One capture frame: the packets of the cameras that saw it.
 
     `time` is the capture time in seconds on the server's monotonic clock (the mean of the
-    members' aligned times), `packets` maps camera id to its packet in increasing camera
-    id (read-only), `complete` says every expected camera is present, and `last_arrival`
-    is the server time in seconds the last member arrived (latency is measured from it).
+    members' aligned times, or the previous frame's time + `MIN_STEP_S` if that is later),
+    `packets` maps camera id to its packet in increasing camera id (read-only), `complete`
+    says every expected camera is present, and `last_arrival` is the server time in
+    seconds the last member arrived (latency is measured from it).
     """
 
     time: float
@@ -139,12 +148,16 @@ class _Camera:
         """The clock offset estimate (s) as of the last packet; None before the first."""
         self.estimated_at = -math.inf
         """Arrival time (s) of the packet the estimate was made at."""
+        self.resolved = math.inf
+        """The last resolved frame's time (s) on this camera's clock, by the estimate
+        when it was resolved; inf while unknown (no estimate then, or a restart since)."""
 
     def forget(self) -> None:
         """Drop the history, clock window and estimate, as after a restart."""
         self.recent.clear()
         self.clock.clear()
         self.estimate = None
+        self.resolved = math.inf
 
     def remember(self, packet: Packet) -> None:
         """Record the packet's (sequence, timestamp)."""
@@ -254,7 +267,7 @@ class FrameSync:
         camera.remember(packet)
         offset = camera.offset(packet.timestamp, arrival, self._clock_window_s, self._clock_rise)
         aligned = packet.timestamp + offset
-        if aligned <= self._last_time + self._tolerance_s:
+        if self._late(camera, packet, aligned):
             counts.late += 1
             return []
         return self._place(_Member(packet, aligned, arrival))
@@ -298,6 +311,16 @@ class FrameSync:
         if state is None:
             raise ValueError(f"camera {camera!r} is not one of the synced cameras")
         return state.estimate
+
+    def _late(self, camera: _Camera, packet: Packet, aligned: float) -> bool:
+        """Whether `camera`'s `packet`, aligned at `aligned` (s), is late: aligned at or
+        before the last resolved frame's time + `tolerance_s`, and captured no later than
+        that frame + `tolerance_s` on its node's clock (see the module docstring)."""
+        tolerance = self._tolerance_s
+        return (
+            aligned <= self._last_time + tolerance
+            and packet.timestamp <= camera.resolved + tolerance
+        )
 
     def _place(self, member: _Member) -> list[SyncedFrame]:
         """Put an aligned, in-time packet into its frame and emit what that resolves."""
@@ -346,13 +369,21 @@ class FrameSync:
     def _resolve(self, frame: _OpenFrame) -> SyncedFrame | None:
         """Emit `frame` or count it skipped, after dropping members now late."""
         counts = self.counts
-        threshold = self._last_time + self._tolerance_s
-        members = {c: m for c, m in frame.members.items() if m.aligned > threshold}
+        cameras = self._cameras
+        members = {
+            c: m
+            for c, m in frame.members.items()
+            if not self._late(cameras[c], m.packet, m.aligned)
+        }
         counts.late += len(frame.members) - len(members)
         if not members:
             return None
         time = math.fsum(m.aligned for m in members.values()) / len(members)
+        time = max(time, self._last_time + MIN_STEP_S)
         self._last_time = time
+        for state in cameras.values():
+            if state.estimate is not None:
+                state.resolved = time - state.estimate
         if len(members) < self._min_cameras:
             counts.skipped += 1
             return None

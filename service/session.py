@@ -33,6 +33,7 @@ import numpy as np
 
 from samba.body import N_MARKERS
 from samba.cameras import read_calibration
+from samba.reconstruct import SkinOffsets
 from samba.service.errors import ServiceError
 from samba.service.frame_pipeline import CameraMarkers, FrameInput, FrameOutput
 from samba.service.frame_sync import FrameSync, SyncedFrame
@@ -136,6 +137,8 @@ class CaptureSession:
         self.frames_failed = 0
         self.predicted_frames = 0
         self.vmc_errors = 0
+        self.subject: SkinOffsets | None = None
+        """The subject's skin offsets once the calibration (`calibrate_s`) reached a frame."""
         self._sequence = 0
         self._in_flight: dict[int, SyncedFrame] = {}
         self._recorder: TakeRecorder | None = None
@@ -214,6 +217,8 @@ class CaptureSession:
         if not self.poses:
             sent = np.stack([frame.packets[c].markers for c in cameras])
             self.labels.add(sent, output.labels[cameras], output.found_again)
+        if output.subject is not None:
+            self.subject = output.subject
         if self._recorder is not None:
             if output.subject is not None and not self._recorder.subject_written:
                 self._recorder.write_subject(output.subject)
@@ -329,6 +334,7 @@ class CaptureSession:
             "frames_out": self.frames_out,
             "frames_predicted": self.predicted_frames,
             "frames_failed": self.frames_failed,
+            "subject_calibrated": self.subject is not None,
             "frames_in_flight": len(self._in_flight),
             "sync": dict(vars(counts)),
             "outside_image": {"markers": self.markers_outside, "blobs": self.blobs_outside},

@@ -35,8 +35,9 @@ loopback nothing is lost, so no frame waits that long (a stage's default is 50).
 MAX_SKEW_S = 60.0
 """How far (s) a test server lets a packet's capture time lag its arrival. A node that
 computes its frames (the markerless node) falls behind a real-time feed on a busy
-machine, seconds by the end of a 3 s take; the default window (5 s) would drop its
-last packets as off clock."""
+machine, seconds by the end of a 3 s take, and a capture played again on the same grid
+after waiting for the server goes out late; the default window (5 s) would drop those
+packets as off clock."""
 
 
 def config(calibration: Path, store: Path, **changes: object) -> SessionConfig:

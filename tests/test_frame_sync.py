@@ -513,6 +513,28 @@ def test_a_node_catching_up_after_a_3_s_stall_loses_no_frame() -> None:
     assert steps == pytest.approx(PERIOD, abs=CLOCK_RISE * 3.5 + 1e-9)
 
 
+def test_a_first_packet_sent_late_does_not_make_the_next_frame_late() -> None:
+    # The nodes' first packets go out 17.6 ms late (a busy machine) and the second
+    # capture's right behind them, 1 ms after it: the offset estimates fall by 16.6 ms
+    # and capture 1 aligns 0.1 ms after frame 0, which was emitted with the first
+    # estimates. It is a new capture on the nodes' clocks, not a late packet. (It was
+    # dropped as late: a live take lost its second frame.) Camera 1's packet of capture
+    # 50, delayed 0.2 s past its frame (skipped with camera 0 alone), is still late.
+    deliveries = [
+        (capture_time(0) + 0.0176 + 0.0001 * k if k < 2 else capture_time(k) + 0.001, pkt)
+        for k in range(120)
+        for pkt in (packet(0, k, k * PERIOD), packet(1, k, k * PERIOD))
+    ]
+    deliveries = [(t + 0.2 if p.camera == 1 and p.sequence == 50 else t, p) for t, p in deliveries]
+    sync = FrameSync([0, 1], FPS)
+    frames = run(sync, deliveries)
+    assert [sequences(f) for f in frames] == [[k, k] for k in range(120) if k != 50]
+    assert all(f.complete for f in frames)
+    assert (sync.counts.late, sync.counts.skipped) == (1, 1)
+    steps = np.diff([f.time for f in frames])
+    assert np.all(steps > 0) and np.all(steps < 2 * PERIOD + 1e-9)  # 2: across capture 50
+
+
 # ---------------------------------------------------------------- validation
 
 
