@@ -22,7 +22,8 @@ from samba.base.errors import InputError, SambaError
 INSTALL_HINT = "pip install 'samba-mocap[cluster]'"
 """What installs Dask distributed beside Samba (on the client and on every worker)."""
 TASKS_PER_WORKER = 4
-"""Fewest tasks per worker `outcomes_in_order` makes of a list of items (for balance)."""
+"""Fewest tasks per worker thread `outcomes_in_order` makes of a list of items (for
+balance)."""
 CONNECT_SECONDS = 10.0
 """How long `cluster_client` waits for a scheduler to answer."""
 SCHEDULER_SETTINGS = {
@@ -111,7 +112,7 @@ def outcomes_in_order(
     running it died).
 
     Consecutive items go together in tasks of up to `most_per_task` (fewer when the
-    workers would get less than `TASKS_PER_WORKER` tasks each): short items pay the
+    workers' threads would get less than `TASKS_PER_WORKER` tasks each): short items pay the
     scheduler's cost per task once per group. A group whose workers died is run again
     item by item, so that only the item that kills its worker fails. Each of `shared` is
     sent to every worker once, not once per task: it is a task of its own whose outcome
@@ -125,15 +126,16 @@ def outcomes_in_order(
     with dask.config.set({"distributed.admin.large-graph-warning-threshold": "1TB"}):
         sent = [client.submit(_itself, value, pure=False) for value in shared]
 
+    pending: dict[Any, list[int]] = {}
+
     def submit(places: list[int]) -> Any:
         group = [items[i] for i in places]
         future = client.submit(_run_group, task, group, *sent, pure=False)
         pending[future] = places
         return future
 
-    workers = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
-    size = max(1, min(most_per_task, len(items) // (TASKS_PER_WORKER * workers)))
-    pending: dict[Any, list[int]] = {}
+    threads = max(1, sum(client.nthreads().values()))
+    size = max(1, min(most_per_task, len(items) // (TASKS_PER_WORKER * threads)))
     running = as_completed(
         [submit(list(range(i, min(i + size, len(items))))) for i in range(0, len(items), size)]
     )
