@@ -13,9 +13,10 @@ from typing import Any
 import numpy as np
 import pytest
 from cluster_fixtures import read_or_die
+from distributed import LocalCluster
 
 import samba.base.cluster as cluster_module
-from samba.base import cluster_client
+from samba.base import InputError, cluster_client
 from samba.cli import main
 from samba.db import PoseStore
 from samba.ingest import import_paths
@@ -134,3 +135,16 @@ def test_wrong_cluster_flags_are_one_line_and_the_store_keeps_its_takes(
     last = err.strip().splitlines()[-1]
     assert says in last and "Traceback" not in err
     assert stored(store)[0] == before[0]
+
+
+def test_a_scheduler_without_workers_is_one_line(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(cluster_module, "CONNECT_SECONDS", 1.0)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as empty:
+        address = empty.scheduler_address
+        with pytest.raises(InputError) as caught, cluster_client(address=address):
+            pass
+    assert str(caught.value) == (
+        f"--cluster {address}: the scheduler has no worker; start some: dask worker {address}"
+    )

@@ -25,7 +25,7 @@ TASKS_PER_WORKER = 4
 """Fewest tasks per worker thread `outcomes_in_order` makes of a list of items (for
 balance)."""
 CONNECT_SECONDS = 10.0
-"""How long `cluster_client` waits for a scheduler to answer."""
+"""How long `cluster_client` waits for a scheduler to answer, then for its first worker."""
 SCHEDULER_SETTINGS = {
     "distributed.scheduler.allowed-failures": 1,
     "distributed.scheduler.worker-saturation": 1.0,
@@ -62,7 +62,8 @@ def cluster_client(workers: int | None = None, address: str | None = None) -> It
     """A Dask `Client` of a new local cluster of `workers` single-threaded processes
     (closed on exit) or of the scheduler at `address`; None (run in-process) without
     either. `InputError` naming the flag when both are given, `workers` < 1, Dask is not
-    installed or no scheduler answers at `address` within `CONNECT_SECONDS`."""
+    installed, or no scheduler answers at `address`, or it has no worker, within
+    `CONNECT_SECONDS`."""
     if workers is None and address is None:
         yield None
         return
@@ -83,6 +84,11 @@ def cluster_client(workers: int | None = None, address: str | None = None) -> It
             problem = f"no Dask scheduler answers there ({_first_line(exc)})"
             raise InputError(flag, problem) from None
         with client:
+            try:
+                client.wait_for_workers(1, timeout=CONNECT_SECONDS)
+            except TimeoutError:
+                problem = f"the scheduler has no worker; start some: dask worker {address}"
+                raise InputError(flag, problem) from None
             yield client
         return
     try:
