@@ -55,6 +55,7 @@ from samba.markers import (
     standing_lead_in,
     static_mask,
 )
+from samba.service.node_summary import NodeSummary, NodeTally
 from samba.service.packet import MAX_BLOBS, MarkerPacket, PosePacket, encode, random_epoch
 from samba.synthetic import generate
 
@@ -65,8 +66,6 @@ DEFAULT_FPS = 30.0
 RENDER_CHUNK_FRAMES = 4
 """Frames the synthetic rig renders at once: few, so that rendering never stalls a
 real-time feed by more than a frame interval (about 20 ms at 640x480)."""
-STATUS_SECONDS = 5.0
-"""Interval of the status lines `run_node` prints when asked."""
 START_DELAY_SECONDS = 0.5
 """How far ahead of the first frame's request a wall-clock grid starts when no start time
 is given."""
@@ -437,59 +436,6 @@ def grid_captures(
             return
 
 
-@dataclass(frozen=True)
-class NodeSummary:
-    """What a node run did: `frames` sent (or attempted), `missing_rate` the fraction of
-    (frame, marker) reported missing, `send_errors` packets that could not be sent,
-    `late_frames` frames whose packet went out after their deadline once the node had
-    kept one (of `paced_frames` that had one), `startup_frames` the late frames before
-    the first on time (the node's start-up: a grid started before it was ready, the
-    first frame's compiling), `seconds` of wall time, `process_ms` mean detection +
-    tracking time per frame, `interrupted` whether Ctrl-C ended it, `missing_what` what
-    the missing rate counts, for people."""
-
-    camera: int
-    frames: int
-    missing_rate: float
-    send_errors: int
-    late_frames: int
-    paced_frames: int
-    seconds: float
-    process_ms: float
-    interrupted: bool
-    missing_what: str = "markers missing"
-    startup_frames: int = 0
-
-    @property
-    def kept_up(self) -> bool:
-        """Whether every frame with a deadline after the start-up was sent in time."""
-        return self.late_frames == 0
-
-    def describe(self) -> str:
-        """One line for people."""
-        if self.paced_frames:
-            on_time = self.paced_frames - self.late_frames - self.startup_frames
-            starting = (
-                f", the first {self.startup_frames} late while the node started"
-                if self.startup_frames
-                else ""
-            )
-            pace = (
-                f"kept up with real time ({on_time} frames on time{starting})"
-                if self.kept_up
-                else f"fell behind real time: {self.late_frames} of {self.paced_frames} frames "
-                f"late{starting}"
-            )
-        else:
-            pace = "not paced"
-        ended = "interrupted; " if self.interrupted else ""
-        return (
-            f"camera {self.camera}: {ended}{self.frames} frames in {self.seconds:.1f} s, "
-            f"{100 * self.missing_rate:.1f}% {self.missing_what}, {self.send_errors} send errors, "
-            f"{pace}, {self.process_ms:.2f} ms per frame detecting and tracking"
-        )
-
-
 def run_node(
     node: Node,
     captures: Iterable[Capture],
@@ -504,11 +450,11 @@ def run_node(
     sequence numbers from `start_sequence`, one per frame, wrapping from 2^32 - 1 to 0,
     where the sender draws a new epoch (the sequence only increases within one).
     The node's tracker restarts on every capture marked `first`. With a
-    `status` stream, a one-line status goes there every `STATUS_SECONDS`. InputError
+    `status` stream, a one-line status goes there every `node_summary.STATUS_SECONDS`. InputError
     from the feed or the frames (wrong size, unreadable) propagates.
     """
     sequence = start_sequence % _SEQUENCE_MODULUS
-    tally = _Tally(sender, node.MISSING)
+    tally = NodeTally(sender, node.MISSING)
     interrupted = False
     try:
         for capture in captures:
@@ -528,67 +474,6 @@ def run_node(
     except KeyboardInterrupt:
         interrupted = True
     return tally.summary(interrupted)
-
-
-class _Tally:
-    """The running counts of a node run, and the status lines and summary made of them."""
-
-    def __init__(self, sender: PacketSender, missing_what: str) -> None:
-        self.sender = sender
-        self.missing_what = missing_what
-        self.began = time.monotonic()
-        self.frames = self.missing = self.late = self.paced = self.startup = 0
-        self.process_s = 0.0
-        self._mark = (self.began, 0, 0)
-        """Clock, frames and send errors at the last status line (or the first frame)."""
-
-    def count(self, values: np.ndarray | None, deadline: float | None) -> None:
-        """Count one frame sent now: its markers (8, 2) or pose (13, 3), None when
-        nothing was sent, and its deadline (None: unpaced)."""
-        if self.frames == 0:
-            self._mark = (time.monotonic(), 0, self.sender.errors)
-        self.frames += 1
-        self.missing += N_MARKERS if values is None else int(np.isnan(values[:, 0]).sum())
-        if deadline is not None:
-            late = time.time() > deadline
-            starting = self.paced == self.startup  # no frame on time yet
-            self.paced += 1
-            if late and starting:
-                self.startup += 1
-            else:
-                self.late += late
-
-    def status_due(self) -> bool:
-        """Whether `STATUS_SECONDS` have passed since the last status line."""
-        return time.monotonic() >= self._mark[0] + STATUS_SECONDS
-
-    def status_line(self) -> str:
-        """How the node is doing since the last status line, as one line."""
-        now, (since, frames, errors) = time.monotonic(), self._mark
-        self._mark = (now, self.frames, self.sender.errors)
-        errors = self.sender.errors - errors
-        return (
-            f"camera {self.sender.camera}: frame {self.frames}, "
-            f"{(self.frames - frames) / max(now - since, 1e-9):.1f} fps, "
-            f"{self.late} late so far, {errors} send errors in the last {now - since:.1f} s"
-            + (f" ({self.sender.last_error})" if errors else "")
-        )
-
-    def summary(self, interrupted: bool) -> NodeSummary:
-        """The run's summary, now."""
-        return NodeSummary(
-            camera=self.sender.camera,
-            frames=self.frames,
-            missing_rate=self.missing / (N_MARKERS * self.frames) if self.frames else math.nan,
-            send_errors=self.sender.errors,
-            late_frames=self.late,
-            paced_frames=self.paced,
-            seconds=time.monotonic() - self.began,
-            process_ms=1000.0 * self.process_s / self.frames if self.frames else math.nan,
-            interrupted=interrupted,
-            missing_what=self.missing_what,
-            startup_frames=self.startup,
-        )
 
 
 def _video_fps(path: Path) -> float:

@@ -16,6 +16,7 @@ import pytest
 
 import samba.service.cli.node
 import samba.service.node
+import samba.service.node_summary
 from samba.body.skeleton import markers_of
 from samba.cameras.calibration_file import write_calibration
 from samba.cameras.camera import Camera, CameraGroup
@@ -329,7 +330,7 @@ def test_a_server_that_is_not_listening_only_counts_errors(
 def test_ctrl_c_ends_with_the_summary(
     rig: Rig, receiver: Receiver, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(samba.service.node, "STATUS_SECONDS", 0.0)
+    monkeypatch.setattr(samba.service.node_summary, "STATUS_SECONDS", 0.0)
     feed = SyntheticFeed(rig.cameras[1], 1, rig.lead_in, FPS, SEED, START_AT, pace=False)
 
     def interrupted_after_five() -> Iterator[Capture]:
