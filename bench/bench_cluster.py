@@ -163,6 +163,7 @@ def main() -> None:
     read_per_file = imports["in-process"] / len(files)
     eval_per_take = evals["in-process"] / len(test)
     size = len(pickle.dumps(train, protocol=5)) / 1e6
+    sent_back = len(pickle.dumps(takes, protocol=5)) / len(files) / 1e3
     print_table(
         "limits, each measured alone (what a 100-worker cluster meets first)",
         ["cost", "measured", "unit", "limit it sets"],
@@ -174,6 +175,12 @@ def main() -> None:
                 f"{read_per_file / (commit / len(files)):.0f} readers' worth of files",
             ],
             ["single writer: index rebuild", index, f"s for {poses} poses", "once per import"],
+            [
+                "a file's take, worker to client",
+                sent_back,
+                "kB",
+                f"{sent_back / read_per_file / 1e3:.1f} MB/s per busy worker",
+            ],
             [
                 "training takes to 2 workers",
                 transfer,
