@@ -70,6 +70,7 @@ def test_cluster_import_stores_what_a_serial_import_stores(
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(300)  # a cluster that lost its workers waits for them: fail instead
 def test_a_worker_killed_mid_import_leaves_a_sound_store_and_the_file_reported(
     client: Any, small_files: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
