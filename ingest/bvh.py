@@ -43,6 +43,9 @@ MAX_JOINTS = 10_000
 """Most joints (End Sites included) a hierarchy may declare."""
 MAX_NAME_CHARS = 200
 """Longest joint name read."""
+MAX_OFFSET = 1e7
+"""Largest OFFSET component read: 10 km in millimetres, the smallest unit BVH files use
+(a bone that long is a broken file, and its squares would overflow)."""
 _MAX_CHANNELS = 6
 """Most channels of one joint: three positions and three rotations."""
 _MAX_FRAME_DIGITS = 18
@@ -373,7 +376,14 @@ def _open_joint(tokens: _Tokens, joints: list[BvhJoint], parent: int, end_site: 
             )
     tokens.expect("{")
     tokens.expect("OFFSET")
+    offset_line = tokens.line
     offset = np.array([tokens.number(f"OFFSET of {name}") for _ in range(3)])
+    if np.abs(offset).max() > MAX_OFFSET:
+        raise BvhError(
+            tokens.source,
+            f"OFFSET of {name}: {np.abs(offset).max():g} is out of range (at most {MAX_OFFSET:g})",
+            offset_line,
+        )
     offset.flags.writeable = False  # parsed hierarchies are shared between files
     channels: tuple[str, ...] = ()
     if tokens.peek() is not None and tokens.peek().upper() == "CHANNELS":

@@ -260,3 +260,13 @@ def test_with_kernels_off_the_reader_reads_the_same_numbers(
     compiled = parse_bvh(data).motion
     monkeypatch.setenv("SAMBA_KERNELS", "numpy")
     assert_same_bits(parse_bvh(data).motion, compiled)
+
+
+@pytest.mark.parametrize("value", ["1e308", "-2e7"])
+def test_an_offset_beyond_10_km_in_millimetres_is_named_with_its_line(value: str) -> None:
+    text = (
+        HEADER.replace("OFFSET 0 1 0", f"OFFSET 0 {value} 0")
+        + "Frames: 1\nFrame Time: 0.1\n0 0 0\n"
+    )
+    with pytest.raises(BvhError, match=r":8: OFFSET of hips_end: .* is out of range"):
+        parse_bvh(text)
