@@ -44,8 +44,7 @@ MAX_JOINTS = 10_000
 MAX_NAME_CHARS = 200
 """Longest joint name read."""
 MAX_OFFSET = 1e7
-"""Largest OFFSET component read: 10 km in millimetres, the smallest unit BVH files use
-(a bone that long is a broken file, and its squares would overflow)."""
+"""Largest OFFSET component read: 10 km in millimetres (beyond, a broken file)."""
 _MAX_CHANNELS = 6
 """Most channels of one joint: three positions and three rotations."""
 _MAX_FRAME_DIGITS = 18
@@ -298,13 +297,13 @@ class _Tokens:
         if token.upper() != literal.upper():
             raise BvhError(self.source, f"expected {literal!r}, found {quoted(token)}", line)
 
-    def number(self, what: str) -> float:
+    def number(self, what: str, limit: float = math.inf) -> float:
         line = self.line
         token = self.take(what)
         if not _NUMBER.match(token):
             raise BvhError(self.source, f"{what}: {quoted(token)} is not a number", line)
         value = float(token)
-        if not math.isfinite(value):
+        if not math.isfinite(value) or abs(value) > limit:
             raise BvhError(self.source, f"{what}: {quoted(token)} is out of range", line)
         return value
 
@@ -376,14 +375,7 @@ def _open_joint(tokens: _Tokens, joints: list[BvhJoint], parent: int, end_site: 
             )
     tokens.expect("{")
     tokens.expect("OFFSET")
-    offset_line = tokens.line
-    offset = np.array([tokens.number(f"OFFSET of {name}") for _ in range(3)])
-    if np.abs(offset).max() > MAX_OFFSET:
-        raise BvhError(
-            tokens.source,
-            f"OFFSET of {name}: {np.abs(offset).max():g} is out of range (at most {MAX_OFFSET:g})",
-            offset_line,
-        )
+    offset = np.array([tokens.number(f"OFFSET of {name}", MAX_OFFSET) for _ in range(3)])
     offset.flags.writeable = False  # parsed hierarchies are shared between files
     channels: tuple[str, ...] = ()
     if tokens.peek() is not None and tokens.peek().upper() == "CHANNELS":
