@@ -11,14 +11,24 @@ Voronoi cells) and the distance to the centroid less the cell's radius. With an 
 the search stops once the next bound times (1 + eps) reaches the k-th distance: every
 distance returned is then within (1 + eps) of the true one, as with the k-d tree.
 
-Every table of the index (the full one, each masked one) gets its own cells; the full
-table's are built with the index and saved with the store, a masked table's with the table.
+The features and centroids are stored with their dimensions in `order`, the centroids'
+spread largest first, so that a row's partial distance over the first half of them
+already exceeds the k-th distance for most rows the search reads, which then skip the
+rest (`cells_kernel`).
+
+The full table's cells are built with the index and saved with the store. A masked table
+(markers missing) of a large index gets its cells from the full table's: the Voronoi cells,
+in the masked feature space, of the full table's centroids seen with the same markers
+(`around`, a nearest-centroid assignment instead of a k-means; `samba.db.masked_cells`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 from scipy.spatial.distance import cdist
@@ -35,7 +45,8 @@ class VoronoiCells:
     the table row of each, `starts` (cells + 1,) each cell's first position,
     `centroids` (cells, D) float64, `radii` (cells,) the largest distance of a cell's
     features from its centroid, `between` (cells, cells) the centroids' distances (the
-    cells are their Voronoi cells). Meters throughout."""
+    cells are their Voronoi cells), `order` (D,) the table dimension stored in each column
+    of `features` and `centroids`. Meters throughout."""
 
     features: np.ndarray
     rows: np.ndarray
@@ -43,6 +54,7 @@ class VoronoiCells:
     centroids: np.ndarray
     radii: np.ndarray
     between: np.ndarray
+    order: np.ndarray
 
     @classmethod
     def build(cls, features: np.ndarray, seed: int = 0) -> VoronoiCells:
@@ -61,38 +73,47 @@ class VoronoiCells:
             min_points_per_centroid=1,
             verbose=False,
         )
-        threads = faiss.omp_get_max_threads()
-        faiss.omp_set_num_threads(1)  # OpenMP's spinning threads cost 2-10x on a busy machine
-        try:
+        with _one_thread(faiss):
             kmeans.train(features)
-            _, assigned = kmeans.index.search(features, 1)
-        finally:
-            faiss.omp_set_num_threads(threads)
-        centroids = kmeans.centroids.astype(np.float64)
-        between = cdist(centroids, centroids)
-        return cls._of(features, assigned.ravel(), count, between, centroids)
+        return cls.around(features, kmeans.centroids.astype(np.float64))
 
     @classmethod
-    def _of(
-        cls,
-        features: np.ndarray,
-        assigned: np.ndarray,
-        count: int,
-        between: np.ndarray,
-        centroids: np.ndarray,
-    ) -> VoronoiCells:
-        """Features stored by their cells `assigned` (n,) of `count` around `centroids`."""
+    def around(cls, features: np.ndarray, centroids: np.ndarray) -> VoronoiCells:
+        """The Voronoi cells of `centroids` (cells, D) over features (n, D) float32: each
+        feature in its nearest centroid's cell (FAISS's exact flat search)."""
+        import faiss
+
+        features = np.ascontiguousarray(features, dtype=np.float32)
+        centroids = np.asarray(centroids, dtype=np.float64)
+        nearest = faiss.IndexFlatL2(features.shape[1])
+        nearest.add(centroids.astype(np.float32))
+        with _one_thread(faiss):
+            _, assigned = nearest.search(features, 1)
+        return cls._of(features, assigned.ravel(), centroids)
+
+    @classmethod
+    def _of(cls, features: np.ndarray, assigned: np.ndarray, centroids: np.ndarray) -> VoronoiCells:
+        """Features stored by their cells `assigned` (n,) around `centroids` (cells, D)."""
+        count = len(centroids)
         rows = np.argsort(assigned, kind="stable")
-        ordered = np.ascontiguousarray(features[rows])
+        ordered = features[rows]
         starts = np.searchsorted(assigned[rows], np.arange(count + 1)).astype(np.int64)
-        sizes = np.diff(starts)
-        cell_of = np.repeat(np.arange(count), sizes)
+        cell_of = np.repeat(np.arange(count), np.diff(starts))
         gaps = np.linalg.norm(ordered.astype(np.float64) - centroids[cell_of], axis=1)
         radii = np.zeros(count)
         np.maximum.at(radii, cell_of, gaps)
         # float32 features are compared with float32 queries: a margin for the rounding.
         radii = radii * (1.0 + 1e-6) + 1e-6
-        return cls(ordered, rows.astype(np.int64), starts, centroids, radii, between)
+        order = spread_order(centroids)
+        return cls(
+            np.ascontiguousarray(ordered[:, order]),
+            rows.astype(np.int64),
+            starts,
+            np.ascontiguousarray(centroids[:, order]),
+            radii,
+            cdist(centroids, centroids),
+            order,
+        )
 
     def __len__(self) -> int:
         return len(self.features)
@@ -103,7 +124,7 @@ class VoronoiCells:
         return {
             f"{prefix}rows": self.rows,
             f"{prefix}starts": self.starts,
-            f"{prefix}centroids": self.centroids,
+            f"{prefix}centroids": self.table_centroids,
             f"{prefix}radii": self.radii,
             f"{prefix}between": self.between,
         }
@@ -114,11 +135,35 @@ class VoronoiCells:
     ) -> VoronoiCells:
         """The cells saved by `arrays`, over the table's features (n, D) in table order."""
         rows = arrays[f"{prefix}rows"]
+        centroids = arrays[f"{prefix}centroids"]
+        order = spread_order(centroids)
         return cls(
-            np.ascontiguousarray(features[rows]),
+            np.ascontiguousarray(features[rows][:, order]),
             rows,
             arrays[f"{prefix}starts"],
-            arrays[f"{prefix}centroids"],
+            np.ascontiguousarray(centroids[:, order]),
             arrays[f"{prefix}radii"],
             arrays[f"{prefix}between"],
+            order,
         )
+
+    @property
+    def table_centroids(self) -> np.ndarray:
+        """The centroids (cells, D) with their dimensions in the table's order."""
+        return self.centroids[:, np.argsort(self.order)]
+
+
+def spread_order(centroids: np.ndarray) -> np.ndarray:
+    """The dimensions (D,) of centroids (cells, D) by their spread, largest first."""
+    return np.argsort(-np.var(centroids, axis=0), kind="stable").astype(np.int64)
+
+
+@contextmanager
+def _one_thread(faiss: ModuleType) -> Iterator[None]:
+    """FAISS on one OpenMP thread (its spinning threads cost 2-10x on a busy machine)."""
+    threads = faiss.omp_get_max_threads()
+    faiss.omp_set_num_threads(1)
+    try:
+        yield
+    finally:
+        faiss.omp_set_num_threads(threads)

@@ -22,15 +22,16 @@ k-th distance is not clear, by the float32 error bound, of the best pose left ou
 
 An observation with missing markers is compared with features of the database poses
 computed by the same alignment with the same markers masked, so that the origin and
-heading agree; a tree for each such mask is built on first use and kept (the 8 masks of
-one missing marker are the common ones).
+heading agree; a table for each such mask is made on first use and kept (the 8 masks of
+one missing marker are the common ones). With the compiled kernels a small masked table
+is scanned, and a large index's are made in the background while the full table's cells
+answer (`samba.db.masked_cells`), so that no query waits for one.
 """
 
 from __future__ import annotations
 
 import os
 import tempfile
-import threading
 import zipfile
 from collections import OrderedDict
 from concurrent.futures import ThreadPoolExecutor
@@ -38,6 +39,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy
@@ -47,6 +49,9 @@ from samba.base import KernelSet, kernels_enabled, usable_cores
 from samba.body import N_MARKERS, align_markers, markers_of
 from samba.db.cells import VoronoiCells
 from samba.db.errors import QueryError, StoreError
+
+if TYPE_CHECKING:
+    from samba.db.masked_cells import MaskedCells
 
 FORMAT = 3
 DEFAULT_DIMS = 14
@@ -73,11 +78,11 @@ the compiled scan 0.05 ms at 1.6 x 10^4 poses and 0.5 ms at 10^5, the cells 0.06
 numpy's scan ties the exact tree at 10^4 and takes 1.7x its time at 3 x 10^4."""
 SCAN_CHUNK = 64
 """Queries scanned per matrix product (bounds the (chunk, n) distance block)."""
-BACKGROUND_CELLS_FROM = 20_000
-"""A scanned table of more poses gets its cells built in the background and is searched
-by them once they are ready (the compiled scan: 0.05 ms at 1.6 x 10^4 poses, 0.5 ms at
-10^5; the cells 0.06-0.1 ms)."""
-_BACKGROUND_LOCK = threading.Lock()
+MASKED_CELLS_FROM = 20_000
+"""With the compiled kernels, an index of more poses answers queries with markers missing
+from masked cells made in the background (`samba.db.masked_cells`) instead of scanning a
+masked table (the compiled scan: 0.05 ms at 1.6 x 10^4 poses, 0.5 ms at 10^5; the cells
+0.06-0.1 ms)."""
 THREADED_BATCH = 64
 """Batches of at least this many queries are split over the cores (compiled kernels)."""
 
@@ -109,19 +114,6 @@ class _Tree:
         _, vectors = np.linalg.eigh(cov)
         dims = min(self.dims, features.shape[1])
         return mean, np.ascontiguousarray(vectors[:, ::-1][:, :dims])
-
-    def _cells_in_background(self) -> VoronoiCells | None:
-        """The cells once built; the first call starts building them in a thread (no
-        query waits for a k-means), later ones return None until they are ready."""
-        built = self.__dict__.get("cells")
-        if built is not None:
-            return built
-        with _BACKGROUND_LOCK:
-            if "_building" not in self.__dict__:
-                thread = threading.Thread(target=lambda: self.cells, daemon=True)
-                self.__dict__["_building"] = thread
-                thread.start()
-        return None
 
     @cached_property
     def cells(self) -> VoronoiCells:
@@ -187,23 +179,16 @@ class _Tree:
         self, f: np.ndarray, k: int, eps: float, scan: bool
     ) -> tuple[np.ndarray, np.ndarray]:
         """`query` by the compiled kernels: the scan, or the cells (`eps` as the tree's).
-        A table that may be scanned but holds more than `BACKGROUND_CELLS_FROM` poses is
-        scanned while its cells are built in the background, then searched by them,
-        exactly as the scan (eps ignored), so that no answer depends on when they were
-        ready.
         Batches of `THREADED_BATCH` or more queries are split over the cores (the kernels
         release the GIL)."""
         kernels = _kernels()
-        cells = self.cells if not scan else None
-        if scan and len(self.features) > BACKGROUND_CELLS_FROM:
-            cells = self._cells_in_background()
-            eps = 0.0  # exact like the scan: the answer must not depend on the build's timing
-        if cells is None:
+        if scan:
 
             def search(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 return kernels.scan_kernel(self.features, part, k)
 
         else:
+            cells = self.cells
 
             def search(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 d, i = kernels.cells_kernel(
@@ -212,6 +197,7 @@ class _Tree:
                     cells.centroids,
                     cells.between,
                     cells.radii,
+                    cells.order,
                     part,
                     k,
                     float(eps),
@@ -299,9 +285,11 @@ class PoseIndex:
         self.scale_by_tibia = scale_by_tibia
         self._full = full
         self._masked: OrderedDict[int, _Tree] = OrderedDict()
+        self._masked_large: MaskedCells | None = None
         self.scan_limit = SCAN_LIMIT
         if kernels_enabled():
             _kernels().KERNELS.warm_up()
+            self._masked_cells()  # a large index starts its background work now
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -354,6 +342,22 @@ class PoseIndex:
         if not 1 <= k <= len(self):
             raise QueryError("k", f"k must be in 1..{len(self)}, got {k}")
         present = ~np.isnan(markers).any(axis=-1)
+        if kernels_enabled() and present.all() and len(markers) < THREADED_BATCH:
+            cells = self._full.cells
+            dist, idx = _kernels().nearest_poses_kernel(
+                np.ascontiguousarray(markers),
+                self.scale_by_tibia,
+                cells.features,
+                cells.starts,
+                cells.centroids,
+                cells.between,
+                cells.radii,
+                cells.order,
+                cells.rows,
+                k,
+                float(eps),
+            )
+            return (dist[0], idx[0]) if single else (dist, idx)
         aligned, _ = align_markers(markers, scale_by_tibia=self.scale_by_tibia)
         if present.all():
             f = aligned.reshape(len(markers), -1)
@@ -364,22 +368,46 @@ class PoseIndex:
         masks = present @ (1 << np.arange(N_MARKERS))
         dist = np.empty((len(markers), k))
         idx = np.empty((len(markers), k), dtype=np.int64)
+        masked_cells = self._masked_cells()
         for mask in np.unique(masks):
             rows = np.flatnonzero(masks == mask)
             keep = present[rows[0]]
             f = aligned[rows][:, keep].reshape(len(rows), -1)
+            if masked_cells is not None:
+                dist[rows], idx[rows] = masked_cells.query(keep, f, k, eps)
+                continue
             tree = self._tree(int(mask), keep)
             dist[rows], idx[rows] = tree.query(f, k, eps, self._scans(eps, tree))
         return (dist[0], idx[0]) if single else (dist, idx)
 
+    def _masked_cells(self) -> MaskedCells | None:
+        """The masked cells (`samba.db.masked_cells`) that answer queries with markers
+        missing: with the compiled kernels, for an index of more than `scan_limit` or
+        `MASKED_CELLS_FROM` poses; None when masked tables are scanned or searched by
+        their trees."""
+        if not kernels_enabled() or len(self) <= min(self.scan_limit, MASKED_CELLS_FROM):
+            return None
+        if self._masked_large is None:
+            from samba.db.masked_cells import MaskedCells
+
+            self._masked_large = MaskedCells(
+                self.poses, self._full.cells, self.scale_by_tibia, MAX_MASK_TREES
+            )
+        return self._masked_large
+
+    def wait_for_masked_tables(self) -> None:
+        """Block until the masked tables queued in the background are made (tests and
+        benchmarks that time their searches)."""
+        if self._masked_large is not None:
+            self._masked_large.wait_all()
+
     def _scans(self, eps: float, table: _Tree) -> bool:
         """Whether a query of `table` with this eps scans it. With the compiled kernels a
-        table whose cells are prebuilt (the full one) is searched by them, any other of
-        at most `scan_limit` poses scanned (exact, whatever the eps: cheaper than building
-        its cells); by numpy, exact queries of small tables scan and the rest search the
-        tree."""
+        table whose cells are prebuilt (the full one) is searched by them and a masked one
+        scanned (exact, whatever the eps; large indexes use `_masked_cells` instead); by
+        numpy, exact queries of small tables scan and the rest search the tree."""
         if kernels_enabled():
-            return table.prebuilt_cells is None and len(self) <= self.scan_limit
+            return table.prebuilt_cells is None
         return eps == 0 and len(self) <= self.scan_limit
 
     def _tree(self, mask: int, keep: np.ndarray) -> _Tree:

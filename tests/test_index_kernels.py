@@ -44,27 +44,35 @@ def test_scan_kernel_agrees_with_numpy_and_brute_force(
     query = align_markers(markers)[0][:, keep].reshape(batch, -1).astype(np.float32)
     found = np.linalg.norm((table[rows] - query[:, None]).astype(np.float64), axis=-1)
     np.testing.assert_allclose(found, distances, rtol=1e-12)
-    index.scan_limit = 0  # the tree search, exact: brute force's answer
+    index.scan_limit = 0  # the cells' search, exact: brute force's answer
     try:
-        tree_distances, _ = index.query(markers, k=10)
+        index.query(markers, k=10)
+        index.wait_for_masked_tables()
+        cell_distances, _ = index.query(markers, k=10)
     finally:
         index.scan_limit = len(index)
-    np.testing.assert_allclose(distances, tree_distances, rtol=1e-12)
+    np.testing.assert_allclose(distances, cell_distances, rtol=1e-12)
 
 
 @pytest.mark.parametrize("eps", [0.0, 0.5])
 def test_cells_are_exact_and_eps_bounds_the_error(index: PoseIndex, eps: float) -> None:
-    # Masked tables too are searched by their cells once larger than the scan limit.
+    # Masked tables too are searched by cells once the index is larger than the scan
+    # limit: from the full table's cells until the mask's own are made in the background
+    # (exact up to the float32 rounding of the features), then from those.
     rng = np.random.default_rng(11)
     markers = index.poses[rng.integers(0, len(index), 60)][:, [1, 2, 5, 6, 9, 10, 11, 12]]
     markers = markers + rng.normal(0.0, 0.03, markers.shape)
     markers[::2, 4] = np.nan
-    truth, _ = index.query(markers, k=10)  # the full table's cells and the masked scan
+    markers[1::4, 0] = np.nan  # a shoulder lost: the heading comes from the knees
+    truth, _ = index.query(markers, k=10)  # the full table's cells and the masked scans
     index.scan_limit = 0
     try:
+        first, _ = index.query(markers, k=10)
+        index.wait_for_masked_tables()
         found, _ = index.query(markers, k=10, eps=eps)
     finally:
         index.scan_limit = len(index)
+    np.testing.assert_allclose(first, truth, rtol=0, atol=1e-6)
     if eps == 0:
         np.testing.assert_allclose(found, truth, rtol=1e-12)
     else:
@@ -86,3 +94,23 @@ def test_masked_features_kernel_agrees_with_numpy(
         got = marker_features_kernel(poses, keep, scale)
         expected = marker_features(poses, keep, scale)
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("scale_by_tibia", [False, True])
+def test_masks_the_full_cells_cannot_answer_wait_for_their_tables(scale_by_tibia: bool) -> None:
+    # Without a left/right pair (heading from the world) or, scaled by tibia, without a
+    # knee, the full table's features do not give the masked ones: the query waits for
+    # the mask's table and answers as the masked scan does.
+    poses = np.concatenate([t.poses for t in library(1, 3.0)])
+    index = PoseIndex.build(poses, scale_by_tibia=scale_by_tibia)
+    rng = np.random.default_rng(5)
+    markers = poses[rng.integers(0, len(poses), 12)][:, [1, 2, 5, 6, 9, 10, 11, 12]]
+    markers = markers + rng.normal(0.0, 0.02, markers.shape)
+    markers[:6, [1, 3, 5, 7]] = np.nan  # one side only: no pair
+    markers[6:, 4] = np.nan  # a knee lost
+    truth = index.query(markers, k=5)
+    index.scan_limit = 0
+    found = index.query(markers, k=5)
+    waited = slice(None) if scale_by_tibia else slice(0, 6)  # unscaled, a knee is projected
+    np.testing.assert_allclose(found[0][waited], truth[0][waited], rtol=1e-12)
+    np.testing.assert_allclose(found[0], truth[0], rtol=0, atol=1e-6)
