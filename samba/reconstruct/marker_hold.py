@@ -61,6 +61,12 @@ class MarkerHold:
             return out
         for frame in out:
             seen = ~np.isnan(frame).any(axis=-1)
+            if seen.all():  # the common frame, without numpy's masked copies
+                self.age[:] = 0
+                self.last[:] = frame
+                if self.follows:
+                    self.seen_with[:] = frame
+                continue
             self.age = np.where(seen, 0, self.age + 1)
             self.last[seen] = frame[seen]
             held = ~seen & (self.age <= self.hold_frames)

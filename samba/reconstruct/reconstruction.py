@@ -212,6 +212,22 @@ class Reconstructor:
         self._held = MarkerHold(self.config.hold_frames, self.config.hold_follows)
         self._calibration = BoneCalibration(self.config.calibration_frames)
         self._smoothing = JointSmoothing(self.config.joint_smoothing)
+        cfg = self.config
+        self._kernel_settings = np.array(
+            [
+                cfg.variance_kept,
+                cfg.variance_floor,
+                TRUNCATED,
+                ROUNDING_VARIANCE,
+                cfg.alpha,
+                cfg.beta,
+                cfg.beta_missing,
+                cfg.bandwidth,
+                cfg.min_bandwidth,
+                float(cfg.shoulder_origin),
+            ]
+        )
+        """The configuration as `local_solutions_kernel` takes it."""
         if kernels_enabled():
             _kernels().KERNELS.warm_up()
         self.prepare(1)
@@ -363,20 +379,7 @@ class Reconstructor:
         cfg = self.config
         _, rows = self.source.query(markers, k=cfg.k, eps=cfg.eps)
         neighbours = np.asarray(self.source.poses[rows.reshape(-1)], dtype=np.float64)
-        settings = np.array(
-            [
-                cfg.variance_kept,
-                cfg.variance_floor,
-                TRUNCATED,
-                ROUNDING_VARIANCE,
-                cfg.alpha,
-                cfg.beta,
-                cfg.beta_missing,
-                cfg.bandwidth,
-                cfg.min_bandwidth,
-                float(cfg.shoulder_origin),
-            ]
-        )
+        settings = self._kernel_settings
         neighbours = neighbours.reshape(len(markers), cfg.k, N_JOINTS, 3)
         markers = np.ascontiguousarray(markers)
         has_target = np.ascontiguousarray(has_target)
@@ -391,8 +394,8 @@ class Reconstructor:
                 settings,
             )
 
-        workers = usable_cores()
-        if len(markers) < THREADED_FRAMES or workers == 1:
+        workers = 1 if len(markers) < THREADED_FRAMES else usable_cores()
+        if workers == 1:
             return _Solved(*solve(slice(None)))
         bounds = np.linspace(0, len(markers), workers + 1).astype(int)
         with ThreadPoolExecutor(workers) as pool:  # the kernel releases the GIL
