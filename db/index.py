@@ -358,7 +358,12 @@ class PoseIndex:
                 float(eps),
             )
             return (dist[0], idx[0]) if single else (dist, idx)
-        aligned, _ = align_markers(markers, scale_by_tibia=self.scale_by_tibia)
+        if kernels_enabled():
+            aligned = _kernels().aligned_markers_kernel(
+                np.ascontiguousarray(markers), self.scale_by_tibia
+            )
+        else:
+            aligned, _ = align_markers(markers, scale_by_tibia=self.scale_by_tibia)
         if present.all():
             f = aligned.reshape(len(markers), -1)
             dist, idx = self._full.query(f, k, eps, self._scans(eps, self._full))
@@ -374,7 +379,7 @@ class PoseIndex:
             keep = present[rows[0]]
             f = aligned[rows][:, keep].reshape(len(rows), -1)
             if masked_cells is not None:
-                dist[rows], idx[rows] = masked_cells.query(keep, f, k, eps)
+                dist[rows], idx[rows] = masked_cells.query(keep, f, k, eps, int(mask))
                 continue
             tree = self._tree(int(mask), keep)
             dist[rows], idx[rows] = tree.query(f, k, eps, self._scans(eps, tree))

@@ -8,6 +8,7 @@
 | `projected_kernel` | brute force over a masked table, read from the full table's cells |
 | `turned_centers_kernel` | the cells' means and radii of features turned to another heading |
 | `marker_features_kernel` | `marker_features` (`samba.db.index`) |
+| `aligned_markers_kernel` | `align_markers` (`samba.body.alignment`) |
 
 A live frame queries one observation at a time; numpy's scan of it is a matrix product,
 an `argpartition` of every pose and a re-ranking (about 0.23 ms at 16,000 poses), the
@@ -386,6 +387,22 @@ def turned_centers_kernel(
 
 
 @compiled
+def aligned_markers_kernel(markers: np.ndarray, scale_by_tibia: bool) -> np.ndarray:
+    """`align_markers`: observations (b, 8, 3) world meters, NaN = missing, in the
+    canonical frame of their own markers present (b, 8, 3); missing stay NaN."""
+    out = np.empty_like(markers)
+    present = np.empty(N_MARKERS, dtype=np.bool_)
+    origin = np.empty(3)
+    turn = np.empty(4)
+    for q in range(markers.shape[0]):
+        for i in range(N_MARKERS):
+            present[i] = not np.isnan(markers[q, i, 0] + markers[q, i, 1] + markers[q, i, 2])
+        alignment_of(markers[q], present, scale_by_tibia, origin, turn)
+        apply_alignment(markers[q], origin, turn, out[q])
+    return out
+
+
+@compiled
 def marker_features_kernel(poses: np.ndarray, keep: np.ndarray, scale_by_tibia: bool) -> np.ndarray:
     """`marker_features`: the markers in `keep` (8,) bool of poses (n, 13, 3) meters,
     aligned with the other markers masked, as (n, 3 * keep.sum()) float32."""
@@ -432,7 +449,8 @@ def _example_cells() -> tuple[np.ndarray, np.ndarray]:
 
 def _example_features() -> np.ndarray:
     """Compile `marker_features_kernel` for the index's argument types (float32 and
-    float64 poses: a store's memory map and arrays)."""
+    float64 poses: a store's memory map and arrays) and `aligned_markers_kernel`."""
+    aligned_markers_kernel(np.ones((1, N_MARKERS, 3)), False)
     keep = np.ones(N_MARKERS, dtype=np.bool_)
     marker_features_kernel(np.ones((1, 13, 3), dtype=np.float32), keep, False)
     return marker_features_kernel(np.ones((1, 13, 3)), keep, False)

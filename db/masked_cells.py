@@ -66,12 +66,12 @@ class MaskedCells:
         self._start_worker()
 
     def query(
-        self, keep: np.ndarray, f: np.ndarray, k: int, eps: float
+        self, keep: np.ndarray, f: np.ndarray, k: int, eps: float, mask: int
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The k nearest of masked features f (b, 3 m), markers `keep` (8,) bool: distances
-        (b, k) meters and table rows (b, k); by the mask's cells once made (`eps` as the
-        full table's), exactly from the full table's cells before."""
-        mask = _mask_of(keep)
+        """The k nearest of masked features f (b, 3 m), markers `keep` (8,) bool whose bit
+        `mask` is given: distances (b, k) meters and table rows (b, k); by the mask's cells
+        once made (`eps` as the full table's), exactly from the full table's cells before."""
+        f = np.ascontiguousarray(f, dtype=np.float64)
         with self._lock:
             table = self._ready.get(mask)
             if table is not None:

@@ -114,3 +114,18 @@ def test_masks_the_full_cells_cannot_answer_wait_for_their_tables(scale_by_tibia
     waited = slice(None) if scale_by_tibia else slice(0, 6)  # unscaled, a knee is projected
     np.testing.assert_allclose(found[0][waited], truth[0][waited], rtol=1e-12)
     np.testing.assert_allclose(found[0], truth[0], rtol=0, atol=1e-6)
+
+
+def test_observations_are_aligned_as_numpy_aligns_them() -> None:
+    from samba.db.kernels import aligned_markers_kernel
+
+    rng = np.random.default_rng(3)
+    markers = rng.normal(0.0, 0.5, (40, 8, 3))
+    markers[::3, 0] = np.nan  # a shoulder lost: centroid origin, heading from the knees
+    markers[1::5, [2, 5]] = np.nan
+    markers[2::7, [1, 3, 5, 7]] = np.nan  # no pair: no heading
+    for scale in (False, True):
+        expected, _ = align_markers(markers, scale_by_tibia=scale)
+        np.testing.assert_allclose(
+            aligned_markers_kernel(markers, scale), expected, rtol=0, atol=1e-12
+        )
