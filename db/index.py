@@ -342,8 +342,8 @@ class PoseIndex:
         if not 1 <= k <= len(self):
             raise QueryError("k", f"k must be in 1..{len(self)}, got {k}")
         present = ~np.isnan(markers).any(axis=-1)
-        if kernels_enabled() and present.all() and len(markers) < THREADED_BATCH:
-            cells = self._full.cells
+        cells = self._live_cells(present)
+        if cells is not None:
             dist, idx = _kernels().nearest_poses_kernel(
                 np.ascontiguousarray(markers),
                 self.scale_by_tibia,
@@ -384,6 +384,20 @@ class PoseIndex:
             tree = self._tree(int(mask), keep)
             dist[rows], idx[rows] = tree.query(f, k, eps, self._scans(eps, tree))
         return (dist[0], idx[0]) if single else (dist, idx)
+
+    def _live_cells(self, present: np.ndarray) -> VoronoiCells | None:
+        """The cells that answer a live frame's query in one compiled call: with the
+        kernels, a few observations (fewer than `THREADED_BATCH`) with every marker (the
+        full table's), or one observation whose masked table is made; None otherwise.
+        `present` (b, 8) bool."""
+        if not kernels_enabled() or len(present) >= THREADED_BATCH:
+            return None
+        if present.all():
+            return self._full.cells
+        masked_cells = self._masked_cells() if len(present) == 1 else None
+        if masked_cells is None:
+            return None
+        return masked_cells.made(int(present[0] @ (1 << np.arange(N_MARKERS))))
 
     def _masked_cells(self) -> MaskedCells | None:
         """The masked cells (`samba.db.masked_cells`) that answer queries with markers

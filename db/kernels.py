@@ -118,8 +118,9 @@ def nearest_poses_kernel(
     k: int,
     eps: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """`cells_kernel` of observations with every marker: markers (b, 8, 3) world meters,
-    aligned here (`alignment_of`, `apply_alignment`); the cells of the full table
+    """`cells_kernel` of observations that share one set of markers present: markers
+    (b, 8, 3) world meters (NaN = missing), aligned here by the markers present
+    (`alignment_of`, `apply_alignment`); the cells of the table of those markers
     (`features` ... `order` as `cells_kernel` takes them) and `stored` (n,) the table row
     of each stored one. Returns (distances (b, k) meters, table rows (b, k)), what
     `PoseIndex.query` returns, in one call (a live frame's query)."""
@@ -131,15 +132,24 @@ def nearest_poses_kernel(
     rows = np.empty(k, dtype=np.int64)
     scratch = np.empty((2, centroids.shape[0]))
     query = np.empty(d, dtype=np.float32)
-    present = np.ones(N_MARKERS, dtype=np.bool_)
+    flat = np.empty(d)
+    present = np.empty(N_MARKERS, dtype=np.bool_)
     origin = np.empty(3)
     turn = np.empty(4)
     aligned = np.empty((N_MARKERS, 3))
     for q in range(b):
+        for i in range(N_MARKERS):
+            present[i] = not np.isnan(markers[q, i, 0] + markers[q, i, 1] + markers[q, i, 2])
         alignment_of(markers[q], present, scale_by_tibia, origin, turn)
         apply_alignment(markers[q], origin, turn, aligned)
+        slot = 0
+        for i in range(N_MARKERS):
+            if present[i]:
+                for a in range(3):
+                    flat[slot] = aligned[i, a]
+                    slot += 1
         for j in range(d):
-            query[j] = np.float32(aligned[order[j] // 3, order[j] % 3])
+            query[j] = np.float32(flat[order[j]])
         _search_cells(features, starts, centroids, between, radii, query, eps, best, rows, scratch)
         distances[q] = np.sqrt(best)
         for j in range(k):

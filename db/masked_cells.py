@@ -72,10 +72,7 @@ class MaskedCells:
         `mask` is given: distances (b, k) meters and table rows (b, k); by the mask's cells
         once made (`eps` as the full table's), exactly from the full table's cells before."""
         f = np.ascontiguousarray(f, dtype=np.float64)
-        with self._lock:
-            table = self._ready.get(mask)
-            if table is not None:
-                self._ready.move_to_end(mask)
+        table = self.made(mask)
         if table is None and not self._projectable(keep):
             table = self.wait(keep)
         if table is not None:
@@ -107,6 +104,14 @@ class MaskedCells:
             k,
         )
         return found, cells.rows[stored]
+
+    def made(self, mask: int) -> VoronoiCells | None:
+        """The cells of the table of bit `mask` if made (now the most recently used)."""
+        with self._lock:
+            table = self._ready.get(mask)
+            if table is not None:
+                self._ready.move_to_end(mask)
+            return table
 
     def _projectable(self, keep: np.ndarray) -> bool:
         """Whether masked features of markers `keep` (8,) bool follow from the full ones: a

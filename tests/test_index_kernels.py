@@ -70,9 +70,11 @@ def test_cells_are_exact_and_eps_bounds_the_error(index: PoseIndex, eps: float) 
         first, _ = index.query(markers, k=10)
         index.wait_for_masked_tables()
         found, _ = index.query(markers, k=10, eps=eps)
+        one_by_one = np.array([index.query(m, k=10, eps=eps)[0] for m in markers])
     finally:
         index.scan_limit = len(index)
     np.testing.assert_allclose(first, truth, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(one_by_one, found, rtol=1e-12)  # a live frame's single call
     if eps == 0:
         np.testing.assert_allclose(found, truth, rtol=1e-12)
     else:
