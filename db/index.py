@@ -342,21 +342,9 @@ class PoseIndex:
         if not 1 <= k <= len(self):
             raise QueryError("k", f"k must be in 1..{len(self)}, got {k}")
         present = ~np.isnan(markers).any(axis=-1)
-        cells = self._live_cells(present)
-        if cells is not None:
-            dist, idx = _kernels().nearest_poses_kernel(
-                np.ascontiguousarray(markers),
-                self.scale_by_tibia,
-                cells.features,
-                cells.starts,
-                cells.centroids,
-                cells.between,
-                cells.radii,
-                cells.order,
-                cells.rows,
-                k,
-                float(eps),
-            )
+        live = kernels_enabled() and len(markers) < THREADED_BATCH
+        if live and present.all():
+            dist, idx = self._cells_query(self._full.cells, markers, k, eps)
             return (dist[0], idx[0]) if single else (dist, idx)
         if kernels_enabled():
             aligned = _kernels().aligned_markers_kernel(
@@ -377,27 +365,38 @@ class PoseIndex:
         for mask in np.unique(masks):
             rows = np.flatnonzero(masks == mask)
             keep = present[rows[0]]
-            f = aligned[rows][:, keep].reshape(len(rows), -1)
             if masked_cells is not None:
+                made = masked_cells.made(int(mask)) if live else None
+                if made is not None:
+                    dist[rows], idx[rows] = self._cells_query(made, markers[rows], k, eps)
+                    continue
+                f = aligned[rows][:, keep].reshape(len(rows), -1)
                 dist[rows], idx[rows] = masked_cells.query(keep, f, k, eps, int(mask))
                 continue
+            f = aligned[rows][:, keep].reshape(len(rows), -1)
             tree = self._tree(int(mask), keep)
             dist[rows], idx[rows] = tree.query(f, k, eps, self._scans(eps, tree))
         return (dist[0], idx[0]) if single else (dist, idx)
 
-    def _live_cells(self, present: np.ndarray) -> VoronoiCells | None:
-        """The cells that answer a live frame's query in one compiled call: with the
-        kernels, a few observations (fewer than `THREADED_BATCH`) with every marker (the
-        full table's), or one observation whose masked table is made; None otherwise.
-        `present` (b, 8) bool."""
-        if not kernels_enabled() or len(present) >= THREADED_BATCH:
-            return None
-        if present.all():
-            return self._full.cells
-        masked_cells = self._masked_cells() if len(present) == 1 else None
-        if masked_cells is None:
-            return None
-        return masked_cells.made(int(present[0] @ (1 << np.arange(N_MARKERS))))
+    def _cells_query(
+        self, cells: VoronoiCells, markers: np.ndarray, k: int, eps: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A live frame's query in one compiled call (`nearest_poses_kernel`): the k
+        nearest in `cells`, the table of the markers present in every one of markers
+        (b, 8, 3) world meters: (distances (b, k), table rows (b, k))."""
+        return _kernels().nearest_poses_kernel(
+            np.ascontiguousarray(markers),
+            self.scale_by_tibia,
+            cells.features,
+            cells.starts,
+            cells.centroids,
+            cells.between,
+            cells.radii,
+            cells.order,
+            cells.rows,
+            k,
+            float(eps),
+        )
 
     def _masked_cells(self) -> MaskedCells | None:
         """The masked cells (`samba.db.masked_cells`) that answer queries with markers
