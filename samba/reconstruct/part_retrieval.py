@@ -53,6 +53,17 @@ marker for the hips (3.31 against 2.96 cm) or on shoulders and knees (3.24) came
 worse. Chosen leave-one-take-out over the takes outside the validation split (issue 44)."""
 
 
+def _part_markers(parts: tuple[Part, ...]) -> np.ndarray:
+    """Each part's markers as a row of a (parts, 8) bool table."""
+    table = np.zeros((len(parts), N_MARKERS), dtype=bool)
+    for row, part in enumerate(parts):
+        table[row, list(part.markers)] = True
+    return table
+
+
+_PART_MARKERS = {parts: _part_markers(parts) for parts in (PARTS, REGRESSION_PARTS)}
+
+
 def refine_with_parts(
     source: NeighbourSource,
     markers: np.ndarray,
@@ -71,11 +82,9 @@ def refine_with_parts(
     """
     parts = REGRESSION_PARTS if ridge else PARTS
     out = np.array(poses, dtype=np.float64)
-    keep = np.zeros((len(parts), 1, N_MARKERS, 1), dtype=bool)
-    for row, part in enumerate(parts):
-        keep[row, 0, list(part.markers)] = True
-    masked = np.where(keep, markers[None], np.nan)  # (parts, b, 8, 3)
-    present = ~np.isnan(masked).any(axis=-1)
+    keep = _PART_MARKERS[parts]  # (parts, 8)
+    masked = np.where(keep[:, None, :, None], markers[None], np.nan)  # (parts, b, 8, 3)
+    present = keep[:, None] & ~np.isnan(markers).any(axis=-1)[None]
     ok = has_heading(present.reshape(-1, N_MARKERS)).reshape(len(parts), -1)
     ok &= present.sum(axis=-1) >= 3
     if not ok.any():
