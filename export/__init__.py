@@ -5,6 +5,7 @@ and BVH writers (`samba export`); skeleton-only avatars named as other tools nam
 
 from samba.export.avatar_file import avatar_humanoid, read_avatar_rig
 from samba.export.bvh_writer import UNITS, BvhSkeleton, write_bvh_motion
+from samba.export.gltf_reader import read_glb
 from samba.export.gltf_writer import write_glb
 from samba.export.humanoid import BONE_NAMES, N_BONES, HumanoidRig
 from samba.export.live_retarget import LiveRetarget, retarget_together
@@ -31,6 +32,7 @@ __all__ = [
     "load_avatar",
     "mannequin",
     "read_avatar_rig",
+    "read_glb",
     "retarget",
     "retarget_together",
     "write_bvh_motion",

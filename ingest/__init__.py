@@ -2,7 +2,8 @@
 (rig mapping, unit and up-axis detection, resampling), and batch import into a pose store;
 marker takes (C3D files, recorded takes' markers) with their marker sets, the reference
 joint centres of a full marker set by published rules, and a BVH rig rewritten as other
-tools write theirs (`rig_variant`).
+tools write theirs (`rig_variant`); skeletons sketched as joint lists, written as BVH
+(`rest_pose_bvh`, the refused `QUADRUPED`).
 """
 
 from samba.ingest.batch import FileResult, expand_paths, import_paths, read_file
@@ -16,6 +17,7 @@ from samba.ingest.marker_takes import read_marker_take, read_recorded_markers
 from samba.ingest.mcap_take import POSE_TOPIC, SUBJECT_METADATA, TAKE_METADATA, read_take
 from samba.ingest.normalize import floor_height
 from samba.ingest.resolver import HumanoidMap, SkeletonTree, name_kind, resolve_humanoid
+from samba.ingest.rig_sketches import QUADRUPED, SketchJoint, rest_pose_bvh, unnamed_rig
 from samba.ingest.rig_variants import RIG_CONVENTIONS, RIG_STRUCTURES, rig_variant
 from samba.ingest.rigs import BUILTIN_RIGS, DETECTED, RigMap, detect_rig, rig_of
 
@@ -24,6 +26,7 @@ __all__ = [
     "DETECTED",
     "PLUG_IN_GAIT",
     "POSE_TOPIC",
+    "QUADRUPED",
     "RIG_CONVENTIONS",
     "RIG_STRUCTURES",
     "SUBJECT_METADATA",
@@ -41,6 +44,7 @@ __all__ = [
     "RigError",
     "RigMap",
     "SkeletonTree",
+    "SketchJoint",
     "detect_rig",
     "expand_paths",
     "floor_height",
@@ -57,6 +61,8 @@ __all__ = [
     "reader_kernels",
     "reference_joints",
     "resolve_humanoid",
+    "rest_pose_bvh",
     "rig_of",
     "rig_variant",
+    "unnamed_rig",
 ]

@@ -21,8 +21,12 @@ What is written (`EXAMPLE_FILES`), all synthetic and a few MB:
   of jumping jacks (the men's-M body), for `samba capture-volume`;
 - `studio_walk.bvh`: a synthetic walk as a game-studio rig writes it (names like
   `UpperArm_L`, a `joint_Root` above the hips, six channels on every joint; 120 fps);
+- `quadruped.bvh`: a four-legged rig whose joints are named `Bone0`, `Bone1`, ...
+  (`samba.ingest.QUADRUPED`), which `samba db import` refuses: not a humanoid;
 - `ue_avatar.glb`: a skeleton-only avatar with Unreal's bone names, its Hips joint 8 cm
   above its legs;
+- `me.gltf`: a JSON glTF avatar whose buffer file `me.bin` is missing, which `samba
+  export --avatar` refuses naming that file;
 - `keys.toml`: the nodes' keys file of the LAN example (`cam0.key`, `cam1.key`, which
   the example draws itself).
 
@@ -32,6 +36,7 @@ folder unless `force`, which replaces them.
 
 from __future__ import annotations
 
+import json
 import shutil
 import tempfile
 from collections.abc import Callable
@@ -54,11 +59,19 @@ from samba.db import build_synthetic_store
 from samba.export import (
     BvhSkeleton,
     HumanoidRig,
+    read_glb,
     retarget,
     write_bvh_motion,
     write_named_avatar,
 )
-from samba.ingest import RIG_STRUCTURES, read_bvh, rig_variant
+from samba.ingest import (
+    QUADRUPED,
+    RIG_STRUCTURES,
+    read_bvh,
+    rest_pose_bvh,
+    rig_variant,
+    unnamed_rig,
+)
 from samba.service.demo import DemoSettings, demo_capture
 from samba.silhouette import (
     SilhouetteView,
@@ -95,7 +108,9 @@ EXAMPLE_FILES = (
     "empty",
     "jacks",
     "studio_walk.bvh",
+    "quadruped.bvh",
     "ue_avatar.glb",
+    "me.gltf",
     "keys.toml",
 )
 """What `write_examples` writes in its folder: files and folders."""
@@ -211,9 +226,24 @@ def _studio_walk(root: Path) -> list[tuple[Path, str]]:
     return [(path, f"a walk of a game-studio rig, {len(take.poses)} frames at 120 fps")]
 
 
-def _avatar(root: Path) -> list[tuple[Path, str]]:
+def _quadruped(root: Path) -> list[tuple[Path, str]]:
+    write_text_atomic(root / "quadruped.bvh", rest_pose_bvh(unnamed_rig(QUADRUPED)))
+    return [(root / "quadruped.bvh", "a four-legged rig, which samba db import refuses")]
+
+
+def _avatars(root: Path) -> list[tuple[Path, str]]:
+    """ue_avatar.glb, and me.gltf: a Unity-named avatar as JSON glTF without its me.bin."""
     write_named_avatar(root / "ue_avatar.glb", "unreal", 0.08)
-    return [(root / "ue_avatar.glb", "an avatar with Unreal's bone names")]
+    with tempfile.TemporaryDirectory() as scratch:
+        glb = Path(scratch) / "me.glb"
+        write_named_avatar(glb, "unity")
+        doc = read_glb(glb).doc
+    doc["buffers"][0]["uri"] = "me.bin"
+    write_text_atomic(root / "me.gltf", json.dumps(doc))
+    return [
+        (root / "ue_avatar.glb", "an avatar with Unreal's bone names"),
+        (root / "me.gltf", "a glTF avatar without its buffer file me.bin"),
+    ]
 
 
 def _keys(root: Path) -> list[tuple[Path, str]]:
@@ -238,6 +268,7 @@ _WRITERS: tuple[Callable[[Path], list[tuple[Path, str]]], ...] = (
     _board_photos,
     _stage,
     _studio_walk,
-    _avatar,
+    _quadruped,
+    _avatars,
     _keys,
 )

@@ -10,7 +10,7 @@ A fenced code block (no language, or bash / sh / shell / console) is an example 
   (`samba ...`, `python ...`, `NAME=value`) or goes on from one; nothing is shown.
 
 `Command.status` is the exit status the page says: 1 when its output shows a `samba:
-error:` line, 2 for a usage error, else 0.
+error:` line, 2 for a usage error, else 0; `Command.errors` are the error lines shown.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from pathlib import Path
 
 SHELL_LANGUAGES = ("", "bash", "sh", "shell", "console")
 _SCRIPT_LINE = re.compile(r"^(samba |python |[A-Za-z_][A-Za-z0-9_]*=)")
-_ERROR = re.compile(r"^samba: error: (.+?): ")
 
 
 @dataclass(frozen=True)
@@ -44,14 +43,9 @@ class Command:
         return 0
 
     @property
-    def error_source(self) -> str | None:
-        """What the shown error names (the text between `samba: error: ` and the next
-        `: `), or None."""
-        for line in self.output:
-            found = _ERROR.match(line)
-            if found:
-                return found.group(1)
-        return None
+    def errors(self) -> tuple[str, ...]:
+        """The `samba: error:` lines the page shows, each as the command must print it."""
+        return tuple(line.strip() for line in self.output if line.startswith("samba: error:"))
 
     @property
     def is_samba(self) -> bool:

@@ -7,9 +7,11 @@ from pathlib import Path
 
 import pytest
 
+from samba.base import InputError
 from samba.cameras import read_calibration
 from samba.cli import main
-from samba.ingest import load_bvh_take, read_bvh
+from samba.export import load_avatar
+from samba.ingest import RigError, load_bvh_take, read_bvh
 from samba.service.examples import BOARD_POSES, EXAMPLE_FILES
 
 
@@ -83,6 +85,11 @@ def test_the_examples_are_written_then_refused_then_replaced(
     studio = read_bvh(folder / "studio_walk.bvh")
     assert studio.names[0] == "joint_Root" and "UpperArm_L" in studio.names
     assert load_bvh_take(folder / "studio_walk.bvh").poses.shape[1:] == (13, 3)
+    with pytest.raises(RigError, match="not a humanoid skeleton: the left leg"):
+        load_bvh_take(folder / "quadruped.bvh")
+    with pytest.raises(InputError, match=r"buffer 0: cannot read its file .*me\.bin"):
+        load_avatar(str(folder / "me.gltf"))
+    assert not (folder / "me.bin").exists()
     size = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
     assert size < 12e6
 

@@ -10,7 +10,14 @@ import numpy as np
 import pytest
 
 from samba.cli import main
-from samba.ingest import RIG_CONVENTIONS, RIG_STRUCTURES, rig_variant
+from samba.ingest import (
+    QUADRUPED,
+    RIG_CONVENTIONS,
+    RIG_STRUCTURES,
+    rest_pose_bvh,
+    rig_variant,
+    unnamed_rig,
+)
 from samba.ingest.bvh import read_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.errors import RigError
@@ -40,72 +47,11 @@ def test_every_variant_of_a_shared_rig_imports_to_the_same_joints(
         assert error < 1e-3, (convention, structures, take.rig, error)
 
 
-def _bvh(joints: list[tuple[str, str | None, tuple[float, float, float]]]) -> str:
-    """BVH text of joints (name, parent name, offset in cm), every joint with three
-    rotation channels, two frames in the rest pose."""
-    children: dict[str | None, list[int]] = {}
-    for i, (_, parent, _) in enumerate(joints):
-        children.setdefault(parent, []).append(i)
-    lines, count = ["HIERARCHY"], 0
-
-    def write(i: int, depth: int) -> None:
-        nonlocal count
-        name, parent, (x, y, z) = joints[i]
-        pad = "  " * depth
-        channels = "6 Xposition Yposition Zposition" if parent is None else "3"
-        lines.extend(
-            [
-                f"{pad}{'ROOT' if parent is None else 'JOINT'} {name}",
-                f"{pad}{{",
-                f"{pad}  OFFSET {x} {y} {z}",
-                f"{pad}  CHANNELS {channels} Zrotation Xrotation Yrotation",
-            ]
-        )
-        count += 6 if parent is None else 3
-        for c in children.get(name, []):
-            write(c, depth + 1)
-        if name not in children:
-            end = [f"{pad}  End Site", f"{pad}  {{", f"{pad}    OFFSET 0 -3 0", f"{pad}  }}"]
-            lines.extend(end)
-        lines.append(f"{pad}}}")
-
-    write(children[None][0], 0)
-    lines += ["MOTION", "Frames: 2", "Frame Time: 0.0333333"]
-    lines += [" ".join(["0"] * count)] * 2
-    return "\n".join(lines) + "\n"
-
-
-QUADRUPED = [
-    ("Hips", None, (0, 60, 0)),
-    ("Spine", "Hips", (0, 0, 30)),
-    ("Chest", "Spine", (0, 0, 30)),
-    ("Neck", "Chest", (0, 10, 15)),
-    ("Head", "Neck", (0, 5, 15)),
-    ("LeftUpLeg", "Hips", (10, 0, 0)),
-    ("LeftLeg", "LeftUpLeg", (0, -30, 0)),
-    ("LeftFoot", "LeftLeg", (0, -28, 0)),
-    ("RightUpLeg", "Hips", (-10, 0, 0)),
-    ("RightLeg", "RightUpLeg", (0, -30, 0)),
-    ("RightFoot", "RightLeg", (0, -28, 0)),
-    ("LeftArm", "Chest", (10, 0, 0)),
-    ("LeftForeArm", "LeftArm", (0, -30, 0)),
-    ("LeftHand", "LeftForeArm", (0, -28, 0)),
-    ("RightArm", "Chest", (-10, 0, 0)),
-    ("RightForeArm", "RightArm", (0, -30, 0)),
-    ("RightHand", "RightForeArm", (0, -28, 0)),
-]
-"""A four-legged rig, its legs named as a humanoid's arms and legs."""
 TAIL = [
     ("Tail", "Hips", (0, 0, -20)),
     ("Tail1", "Tail", (0, 0, -20)),
     ("Tail2", "Tail1", (0, 0, -20)),
 ]
-
-
-def _unnamed(rig: list[tuple[str, str | None, tuple[float, float, float]]]) -> list:
-    """`rig` with every joint named "Bone<i>": nothing but the tree to go by."""
-    names = {name: f"Bone{i}" for i, (name, _, _) in enumerate(rig)}
-    return [(names[n], names.get(p), o) for n, p, o in rig]
 
 
 HAND = [("hand_r", None, (0, 100, 0))] + [
@@ -123,8 +69,8 @@ HAND = [("hand_r", None, (0, 100, 0))] + [
 @pytest.mark.parametrize(
     ("rig", "problem"),
     [
-        (_unnamed(QUADRUPED), "the left leg does not hang away from the chest"),
-        (_unnamed(QUADRUPED + TAIL), "its tree has 6 long branches where a humanoid has 5"),
+        (unnamed_rig(QUADRUPED), "the left leg does not hang away from the chest"),
+        (unnamed_rig(QUADRUPED + TAIL), "its tree has 6 long branches where a humanoid has 5"),
         (HAND, "no branch point carries the head and two arms"),
     ],
     ids=["quadruped", "quadruped-with-tail", "hand"],
@@ -133,7 +79,7 @@ def test_a_skeleton_that_is_not_a_humanoids_is_refused_saying_why(
     rig: list, problem: str, tmp_path: Path
 ) -> None:
     path = tmp_path / "rig.bvh"
-    path.write_text(_bvh(rig))
+    path.write_text(rest_pose_bvh(rig))
     with pytest.raises(RigError) as err:
         load_bvh_take(path)
     assert str(err.value).startswith(f"{path}: unknown rig: not a humanoid skeleton: ")
