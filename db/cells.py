@@ -150,7 +150,7 @@ class VoronoiCells:
     @property
     def table_centroids(self) -> np.ndarray:
         """The centroids (cells, D) with their dimensions in the table's order."""
-        return self.centroids[:, np.argsort(self.order)]
+        return np.ascontiguousarray(self.centroids[:, np.argsort(self.order)])
 
 
 def spread_order(centroids: np.ndarray) -> np.ndarray:
