@@ -1,7 +1,7 @@
 """The command examples of the README and the manual, read from their Markdown.
 
-A fenced code block (no language, or bash / sh / shell / console) is an example when a
-`samba` command is in it. Two styles:
+A fenced code block (no language, or bash / sh / shell / console; indented in a list
+item or not) is an example when a `samba` command is in it. Two styles:
 
 - prompt style: lines starting with `$ ` are commands (a line ending in a backslash
   goes on in the next line); the lines after a command, up to the next `$ `, are its
@@ -79,8 +79,10 @@ def page_blocks(path: Path, page: str) -> list[Block]:
             continue
         start, language = i + 1, fence[3:].strip()
         end = next((j for j in range(start, len(lines)) if lines[j].strip() == "```"), len(lines))
+        indent = len(lines[i]) - len(lines[i].lstrip())  # a block in a list item
         if language in SHELL_LANGUAGES:
-            commands = _commands(lines[start:end], start + 1, language)
+            body = [ln[indent:] if not ln[:indent].strip() else ln for ln in lines[start:end]]
+            commands = _commands(body, start + 1, language)
             if any(c.is_samba for c in commands):
                 blocks.append(Block(page, i + 1, tuple(commands)))
         i = end + 1

@@ -270,6 +270,8 @@ def test_the_examples_are_found() -> None:
     assert any(c.text.startswith("T=$((") for c in commands)
     errors = [c for b in page_blocks(ROOT / "docs/export.md", "e") for c in b.commands]
     assert {c.status for c in errors} == {0, 1}
+    in_list = [c.text for b in page_blocks(ROOT / "docs/cli.md", "c") for c in b.commands]
+    assert "samba export studio_walk.bvh -o walk.glb" in in_list  # fences in list items
     shown = {error for c in errors for error in c.errors}
     assert (
         "samba: error: me.gltf: buffer 0: cannot read its file me.bin: No such file or "
