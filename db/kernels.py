@@ -311,14 +311,39 @@ def projected_kernel(
             if bound[c] * bound[c] >= worst:
                 break
             for r in range(starts[c], starts[c + 1]):
-                _turned_row(features, r, column, pair, turned)
-                total = _masked_distance(turned, kept, query, mean)
+                if pair[0] < 0:  # shoulders kept: no turn, the kept columns read in place
+                    total = _centred_distance(features, r, column, kept, query)
+                else:
+                    _turned_row(features, r, column, pair, turned)
+                    total = _masked_distance(turned, kept, query, mean)
                 if total < worst:
                     _keep(best, rows, total, r)
                     worst = best[k - 1]
         distances[q] = np.sqrt(best)
         indices[q] = rows
     return distances, indices
+
+
+@compiled(reassociate=True)
+def _centred_distance(
+    features: np.ndarray, r: int, column: np.ndarray, kept: np.ndarray, query: np.ndarray
+) -> float:
+    """`_masked_distance` of row r of `features` unturned, read in place: with the query
+    centred, |x - mean - q|^2 = |x - q|^2 - |sum x|^2 / m over the m `kept` markers;
+    `column` (8, 3) the stored column of each marker coordinate."""
+    total = 0.0
+    sx = sy = sz = 0.0
+    for s in range(len(kept)):
+        i = kept[s]
+        x = np.float64(features[r, column[i, 0]])
+        y = np.float64(features[r, column[i, 1]])
+        z = np.float64(features[r, column[i, 2]])
+        sx += x
+        sy += y
+        sz += z
+        dx, dy, dz = x - query[3 * s], y - query[3 * s + 1], z - query[3 * s + 2]
+        total += dx * dx + dy * dy + dz * dz
+    return total - (sx * sx + sy * sy + sz * sz) / len(kept)
 
 
 @compiled
