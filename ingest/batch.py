@@ -24,7 +24,8 @@ FileReader = Callable[[Path, BvhImportOptions | None], Take]
 """Reads one motion file as a checked take, raising what is wrong (`read_file`)."""
 FILES_PER_TASK = 8
 """Most files one Dask task reads: a file takes tens of milliseconds to read, about ten
-times what the scheduler spends on a task."""
+times what the scheduler spends on a task. The files of a task are chosen by size (the
+reading time grows with it), so that the tasks have similar work."""
 COMMIT_FILES = 64
 """Most files whose takes `import_paths` commits together."""
 COMMIT_SECONDS = 1.0
@@ -110,9 +111,10 @@ def import_paths(
     `ImportInterrupted` with the results of the files committed before it.
 
     With a Dask `client` (`samba.base.cluster_client`) the files are read (`read`) on its
-    workers, one task each, and committed here in the same order, so the store ends as
-    a serial import leaves it; a file whose worker died each time it was tried fails
-    with `WorkerDeathError`. The bar then counts the files read, in any order.
+    workers, in tasks of up to `FILES_PER_TASK` files of similar total size, and
+    committed here in the same order, so the store ends as a serial import leaves it; a
+    file whose worker died each time it was tried fails with `WorkerDeathError`. The bar
+    then counts the files read, in any order.
     """
     files = expand_paths(paths)
     store.check_catalog()  # nothing goes into a damaged store
@@ -217,7 +219,13 @@ def _readings(
     if client is not None:
         task = partial(read, options=options)
         yield from outcomes_in_order(
-            client, task, files, progress=progress, unit="file", most_per_task=FILES_PER_TASK
+            client,
+            task,
+            files,
+            progress=progress,
+            unit="file",
+            most_per_task=FILES_PER_TASK,
+            cost=_file_bytes,
         )
         return
     bar = tqdm(files, unit="file", disable=None if progress is None else not progress)
@@ -228,6 +236,15 @@ def _readings(
         except Exception as exc:
             outcome = exc
         yield path, outcome
+
+
+def _file_bytes(path: Path) -> float:
+    """The size of the file at `path` in bytes (0 when it cannot be read): what reading it
+    costs, for balancing the cluster's tasks."""
+    try:
+        return float(path.stat().st_size)
+    except OSError:
+        return 0.0
 
 
 def _load_take(path: Path, options: BvhImportOptions | None) -> Take:

@@ -74,8 +74,8 @@ def test_cluster_import_stores_what_a_serial_import_stores(
 def test_a_worker_killed_mid_import_leaves_a_sound_store_and_the_file_reported(
     client: Any, small_files: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(cluster_module, "TASKS_PER_WORKER", 1)  # files 2 by 2 in a task
-    always, once = small_files[1].name, small_files[3].name  # each in a task with another
+    monkeypatch.setattr(cluster_module, "TASKS_PER_WORKER", 1)  # 2 tasks: files 1-3, 0 and 4
+    always, once = small_files[1].name, small_files[3].name  # in one task, with file 2
     read = partial(read_or_die, always=always, once=once, marks=tmp_path)
     store = PoseStore.create(tmp_path / "store")
     results = import_paths(store, small_files, progress=False, client=client, read=read)
@@ -83,7 +83,7 @@ def test_a_worker_killed_mid_import_leaves_a_sound_store_and_the_file_reported(
     assert status[always].status == "failed"
     assert "died each time it was tried" in status[always].error
     assert status[once].status == "added"  # retried on another worker
-    assert status[small_files[0].name].status == "added"  # in the killer's task, read alone
+    assert status[small_files[2].name].status == "added"  # in the killers' task, read alone
     assert (tmp_path / once).exists()  # it did die once
     assert [r.status for r in results].count("added") == len(small_files) - 1
     reopened = PoseStore.open(tmp_path / "store")
@@ -91,6 +91,13 @@ def test_a_worker_killed_mid_import_leaves_a_sound_store_and_the_file_reported(
     assert sorted(t.name for t in reopened.takes) == sorted(
         f.stem for f in small_files if f.name != always
     )
+
+
+def test_items_go_in_groups_of_similar_cost_window_by_window_the_costliest_first() -> None:
+    costs = [5.0, 1.0, 1.0, 1.0, 4.0, 2.0, 2.0, 3.0, 1.0, 9.0]  # windows of 2 groups of 3
+    groups = cluster_module._groups(costs, most=3, per_window=2)
+    assert groups == [[0, 1, 2], [3, 4, 5], [9], [6, 7, 8]]  # sums 7, 7 | 9, 6
+    assert cluster_module._groups([1.0] * 3, most=1, per_window=4) == [[0], [1], [2]]
 
 
 def test_samba_db_import_with_workers_adds_the_files(

@@ -21,9 +21,10 @@ from samba.base.errors import InputError, SambaError
 
 INSTALL_HINT = "pip install 'samba-mocap[cluster]'"
 """What installs Dask distributed beside Samba (on the client and on every worker)."""
-TASKS_PER_WORKER = 4
-"""Fewest tasks per worker thread `outcomes_in_order` makes of a list of items (for
-balance)."""
+TASKS_PER_WORKER = 2
+"""Tasks per worker thread `outcomes_in_order` makes of each window of items it groups:
+enough for the workers to finish together, few enough that each task carries many
+items."""
 CONNECT_SECONDS = 10.0
 """How long `cluster_client` waits for a scheduler to answer, then for its first worker."""
 SCHEDULER_SETTINGS = {
@@ -111,16 +112,21 @@ def outcomes_in_order(
     unit: str = "item",
     name: Callable[[Any], str] = str,
     most_per_task: int = 1,
+    cost: Callable[[Any], float] | None = None,
 ) -> Iterator[tuple[Any, Any]]:
     """Run `task(item, *shared)` on the cluster of `client` for every item; yield (item,
     outcome) in the order of `items`, the outcome being what `task` returned or the
     exception it raised (`WorkerDeathError` naming the item by `name` when the workers
     running it died).
 
-    Consecutive items go together in tasks of up to `most_per_task` (fewer when the
-    workers' threads would get less than `TASKS_PER_WORKER` tasks each): short items pay the
-    scheduler's cost per task once per group. A group whose workers died is run again
-    item by item, so that only the item that kills its worker fails. Each of `shared` is
+    Items go together in tasks of up to `most_per_task` (`_groups`): short items pay the
+    scheduler's cost per task and the round trip once per group. The items are taken in
+    consecutive windows of `TASKS_PER_WORKER` groups per worker thread, and a window's
+    groups have similar sums of `cost(item)` (an estimate of the item's work, in any unit;
+    None: 1 each) and go to the workers costliest first, so that the workers finish
+    together and the outcomes of a window come back before the next window's. A group
+    whose workers died is run again item by item, so that only the item that kills its
+    worker fails. Each of `shared` is
     sent to every worker once, not once per task: it is a task of its own whose outcome
     workers copy from each other (run again if every copy is lost with its worker). The
     progress bar (None: on a terminal only) counts items as their tasks finish, in any
@@ -141,10 +147,9 @@ def outcomes_in_order(
         return future
 
     threads = max(1, sum(client.nthreads().values()))
-    size = max(1, min(most_per_task, len(items) // (TASKS_PER_WORKER * threads)))
-    running = as_completed(
-        [submit(list(range(i, min(i + size, len(items))))) for i in range(0, len(items), size)]
-    )
+    costs = [1.0] * len(items) if cost is None else [cost(item) for item in items]
+    groups = _groups(costs, max(1, most_per_task), TASKS_PER_WORKER * threads)
+    running = as_completed([submit(places) for places in groups])
     finished: dict[int, Any] = {}
     following = 0
     bar = tqdm(total=len(items), unit=unit, disable=None if progress is None else not progress)
@@ -168,6 +173,28 @@ def outcomes_in_order(
         bar.close()
         if pending and client.status == "running":
             client.cancel(list(pending))
+
+
+def _groups(costs: Sequence[float], most: int, per_window: int) -> list[list[int]]:
+    """The places of items of estimated `costs` in groups of up to `most`, in the order to
+    run them. The items are taken in consecutive windows of `per_window * most`, each
+    split into `per_window` groups (one per item when it holds fewer) by the greedy
+    largest-first rule: item by item, costliest first, into the group of the smallest
+    sum that is not full. A window's groups come costliest first, each group's places in
+    item order."""
+    order: list[list[int]] = []
+    span = per_window * most
+    for start in range(0, len(costs), span):
+        window = range(start, min(start + span, len(costs)))
+        places: list[list[int]] = [[] for _ in range(min(per_window, len(window)))]
+        sums = [0.0] * len(places)
+        for i in sorted(window, key=lambda i: -costs[i]):  # stable: ties in item order
+            g = min((g for g in range(len(places)) if len(places[g]) < most), key=sums.__getitem__)
+            places[g].append(i)
+            sums[g] += costs[i]
+        ranked = sorted(range(len(places)), key=lambda g: -sums[g])
+        order.extend(sorted(places[g]) for g in ranked)
+    return order
 
 
 def _run_group(task: Callable[..., Any], group: Sequence[Any], *shared: Any) -> list[Any]:
