@@ -9,14 +9,16 @@ subject's skin offsets are calibrated over a stretch of the take
 (`samba.reconstruct.calibrate_skin_offsets`; the first 2 s unless told otherwise) and
 removed from every frame (`SkinMarkerReconstructor`), and the take is reconstructed in
 chunks of `CHUNK_FRAMES` (the batch path, continuing from chunk to chunk) under a
-progress bar. Every frame gets a pose: frames without enough markers are predicted and
-flagged so (`Reconstruction.predicted`). The poses are moved so that the floor (the
-feet's height at ground contact) is at y = 0, the ankles' height of Samba's convention.
+progress bar, whole or a part at a time (`frames`; the parts `joined` on a cluster).
+Every frame gets a pose: frames without enough markers are predicted and flagged so
+(`Reconstruction.predicted`). The poses are moved so that the floor (the feet's height
+at ground contact) is at y = 0, the ankles' height of Samba's convention.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,7 @@ from samba.ingest import MarkerTake, floor_height
 from samba.markers import fill_gaps
 from samba.reconstruct import (
     PoseEstimate,
+    Reconstruction,
     Reconstructor,
     SkinMarkerReconstructor,
     SkinOffsets,
@@ -95,12 +98,22 @@ def reconstruct_marker_take(
     reconstructor: Reconstructor,
     calibration: tuple[float, float] | None = (0.0, 2.0),
     progress: bool | None = None,
+    frames: tuple[int, int] | None = None,
+    settle: int = 0,
 ) -> MarkerReconstruction:
     """Reconstruct `take` (its markers (n, 8, 3) meters, NaN = missing, at the rate to
     reconstruct at) with `reconstructor`, the skin offsets calibrated over the
     `calibration` stretch (start, stop) in seconds (None: markers taken as joint
     centres). `ServiceError` naming the take when the stretch is outside it or has no
-    frame with enough markers. `progress` None shows the bar on a terminal only."""
+    frame with enough markers. `progress` None shows the bar on a terminal only.
+
+    With `frames` (first, stop) only those frames are kept, a part of the take for
+    `joined`: the `settle` frames before `first` are reconstructed first and thrown away,
+    so that the reconstruction's state (previous estimates, markers held) comes close to
+    that of the whole take's reconstruction, and so are the take's first
+    `calibration_frames` (the bones calibrated on them are those of the whole take).
+    The part's `take` holds those frames, and its poses are not lowered (floor 0): the
+    floor is that of the whole take."""
     longest = int(MAX_FILLED_GAP_S * take.fps)
     markers, filled = fill_gaps(np.asarray(take.markers, dtype=np.float64), longest)
     offsets = SkinOffsets.none()
@@ -115,26 +128,70 @@ def reconstruct_marker_take(
             raise ServiceError(take.source, f"{stretch}: {exc}") from None
     subject = SkinMarkerReconstructor(reconstructor, offsets)
     subject.reset()
-    parts = []
-    bar = tqdm(total=len(markers), unit="frame", disable=None if progress is None else not progress)
+    first, stop = frames or (0, len(markers))
+    lead = max(0, first - settle)
+    _reconstructed(subject, markers, 0, min(lead, reconstructor.config.calibration_frames))
+    _reconstructed(subject, markers, lead, first)
+    bar = tqdm(total=stop - first, unit="frame", disable=None if progress is None else not progress)
     with bar:
-        for first in range(0, len(markers), CHUNK_FRAMES):
-            parts.append(subject.reconstruct(markers[first : first + CHUNK_FRAMES]))
-            bar.update(len(parts[-1]))
-    poses = np.concatenate([p.poses for p in parts])
-    floor = floor_height(poses, take.fps)
-    poses[..., 1] -= floor
-    return MarkerReconstruction(
+        parts = _reconstructed(subject, markers, first, stop, bar)
+    if frames is not None:
+        take = replace(take, points=take.points[first:stop], markers=take.markers[first:stop])
+    result = MarkerReconstruction(
         take,
-        filled,
-        poses,
+        filled[first:stop],
+        np.concatenate([p.poses for p in parts]),
         np.concatenate([p.residual for p in parts]),
         np.concatenate([p.markers_used for p in parts]),
         np.concatenate([p.confident for p in parts]),
         np.concatenate([p.predicted for p in parts]),
         offsets,
+        0.0,
+    )
+    return result if frames is not None else joined([result])
+
+
+def joined(parts: Sequence[MarkerReconstruction]) -> MarkerReconstruction:
+    """The reconstruction of a take from its consecutive `parts` (not lowered, as
+    `reconstruct_marker_take` returns them with `frames`), its poses lowered so that the
+    floor of all of them is at y = 0; the skin offsets, labels and metadata are those of
+    the first part."""
+    first = parts[0]
+    poses = np.concatenate([p.poses for p in parts])
+    floor = floor_height(poses, first.take.fps)
+    poses[..., 1] -= floor
+    take = first.take
+    if len(parts) > 1:
+        points = np.concatenate([p.take.points for p in parts])
+        take = replace(take, points=points, markers=np.concatenate([p.take.markers for p in parts]))
+    return MarkerReconstruction(
+        take,
+        np.concatenate([p.filled for p in parts]),
+        poses,
+        np.concatenate([p.residual for p in parts]),
+        np.concatenate([p.markers_used for p in parts]),
+        np.concatenate([p.confident for p in parts]),
+        np.concatenate([p.predicted for p in parts]),
+        first.offsets,
         floor,
     )
+
+
+def _reconstructed(
+    subject: SkinMarkerReconstructor,
+    markers: np.ndarray,
+    first: int,
+    stop: int,
+    bar: tqdm | None = None,
+) -> list[Reconstruction]:
+    """Frames `first` to `stop` of `markers` (n, 8, 3) reconstructed by `subject`,
+    continuing from its state, in batches of `CHUNK_FRAMES` (each a step of `bar`)."""
+    parts = []
+    for start in range(first, stop, CHUNK_FRAMES):
+        parts.append(subject.reconstruct(markers[start : min(start + CHUNK_FRAMES, stop)]))
+        if bar is not None:
+            bar.update(len(parts[-1]))
+    return parts
 
 
 def write_reconstruction(

@@ -9,6 +9,7 @@ from samba.reconstruct.methods import METHODS, Method, method
 from samba.reconstruct.neighbours import NeighbourSource
 from samba.reconstruct.reconstruction import (
     PoseEstimate,
+    Reconstruction,
     ReconstructionConfig,
     Reconstructor,
     reconstruct_together,
@@ -26,6 +27,7 @@ __all__ = [
     "Method",
     "NeighbourSource",
     "PoseEstimate",
+    "Reconstruction",
     "ReconstructionConfig",
     "Reconstructor",
     "SkinMarkerReconstructor",
