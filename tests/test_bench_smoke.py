@@ -156,3 +156,19 @@ def test_startup_benchmark_prints_its_table(capsys: pytest.CaptureFixture[str]) 
     assert "baseline: numpy path" in capsys.readouterr().out
     assert [r[0] for r in rows][-1].startswith("import, index")
     assert all(float(t) > 0 for r in rows for t in r[1].split(" / "))
+
+
+bench_cluster = _bench("bench_cluster")
+
+
+def test_cluster_benchmark_prints_its_tables(
+    cmu_files: list[Path], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("SAMBA_DATA", str(cmu_files[0].parent.parent))
+    quick = ["--files", "4", "--eval-takes", "2", "--eval-frames", "30", "--empty-tasks", "20"]
+    bench_cluster.main([*quick, "--repeats", "1"])
+    out = capsys.readouterr().out
+    assert "import of the 4 shared CMU files" in out and "2 test takes of 30 frames" in out
+    assert "x 1 worker" in out and "starting a local cluster" in out
+    assert out.count("2 workers") == 4  # import, evaluation, start, the training takes' transfer
+    assert "scheduler per empty task" in out and "load average after" in out

@@ -1,6 +1,6 @@
 """Dask distributed for the batch commands: `--workers N` (a local cluster of N processes,
 started and closed around the command) or `--cluster ADDRESS` (a running scheduler), and
-one task per item with the outcomes handed back in item order.
+tasks of one or more items with the outcomes handed back in item order.
 
 Dask is an optional extra (`samba-mocap[cluster]`), imported only here and only when one
 of the flags is given: a command without them starts as fast as before and runs in its own
