@@ -493,7 +493,15 @@ def _example_features() -> np.ndarray:
 
 KERNELS = KernelSet(
     "pose index",
-    (scan_kernel, cells_kernel, marker_features_kernel),
+    (
+        scan_kernel,
+        cells_kernel,
+        nearest_poses_kernel,
+        projected_kernel,
+        turned_centers_kernel,
+        aligned_markers_kernel,
+        marker_features_kernel,
+    ),
     (_example_scan, _example_cells, _example_features),
     estimate_s=8.0,
 )

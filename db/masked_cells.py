@@ -30,8 +30,7 @@ from collections import OrderedDict, deque
 
 import numpy as np
 
-from samba.body import N_MARKERS
-from samba.body.alignment import HEADING_PAIRS, TIBIA_PAIRS
+from samba.body import HEADING_PAIRS, N_MARKERS, TIBIA_PAIRS
 from samba.db.cells import VoronoiCells
 from samba.db.kernels import (
     cells_kernel,
