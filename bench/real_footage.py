@@ -2,9 +2,10 @@
 from the shared lab session (../shared/data/pose2sim: four synchronised videos, the
 lab's Qualisys calibration).
 
-Run from the project root, after the two captures of docs/real-footage.md:
+Run from the project root, after the two captures of docs/real-footage.md (made in the
+examples' folder DIR, `samba examples DIR`):
 
-    python bench/real_footage.py --bvh walk.bvh [--take walk.mcap] [--frame 99]
+    python bench/real_footage.py --bvh DIR/walk.bvh [--take DIR/walk.mcap] [--frame 99]
                                  [--tolerance PX] [--pictures docs/img/real-footage]
 
 Every frame of the four videos is segmented again as `samba capture-volume --segment`
