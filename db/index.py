@@ -83,6 +83,8 @@ MASKED_CELLS_FROM = 20_000
 from masked cells made in the background (`samba.db.masked_cells`) instead of scanning a
 masked table (the compiled scan: 0.05 ms at 1.6 x 10^4 poses, 0.5 ms at 10^5; the cells
 0.06-0.1 ms)."""
+_MASK_BITS = 1 << np.arange(N_MARKERS)
+"""A marker set's bit mask is its presence (8,) bool times these."""
 THREADED_BATCH = 64
 """Batches of at least this many queries are split over the cores (compiled kernels)."""
 
@@ -346,6 +348,12 @@ class PoseIndex:
         if live and present.all():
             dist, idx = self._cells_query(self._full.cells, markers, k, eps)
             return (dist[0], idx[0]) if single else (dist, idx)
+        masked_cells = self._masked_cells()
+        if live and len(markers) == 1 and masked_cells is not None:  # a live frame
+            made = masked_cells.made(int(present[0] @ _MASK_BITS))
+            if made is not None:
+                dist, idx = self._cells_query(made, markers, k, eps)
+                return (dist[0], idx[0]) if single else (dist, idx)
         if kernels_enabled():
             aligned = _kernels().aligned_markers_kernel(
                 np.ascontiguousarray(markers), self.scale_by_tibia
@@ -358,10 +366,9 @@ class PoseIndex:
             return (dist[0], idx[0]) if single else (dist, idx)
         if not present.any(axis=1).all():
             raise QueryError("markers", "an observation has no marker present")
-        masks = present @ (1 << np.arange(N_MARKERS))
+        masks = present @ _MASK_BITS
         dist = np.empty((len(markers), k))
         idx = np.empty((len(markers), k), dtype=np.int64)
-        masked_cells = self._masked_cells()
         for mask in np.unique(masks):
             rows = np.flatnonzero(masks == mask)
             keep = present[rows[0]]
