@@ -354,14 +354,8 @@ class PoseIndex:
             if made is not None:
                 dist, idx = self._cells_query(made, markers, k, eps)
                 return (dist[0], idx[0]) if single else (dist, idx)
-        if kernels_enabled():
-            aligned = _kernels().aligned_markers_kernel(
-                np.ascontiguousarray(markers), self.scale_by_tibia
-            )
-        else:
-            aligned, _ = align_markers(markers, scale_by_tibia=self.scale_by_tibia)
         if present.all():
-            f = aligned.reshape(len(markers), -1)
+            f = self._aligned(markers).reshape(len(markers), -1)
             dist, idx = self._full.query(f, k, eps, self._scans(eps, self._full))
             return (dist[0], idx[0]) if single else (dist, idx)
         if not present.any(axis=1).all():
@@ -369,21 +363,34 @@ class PoseIndex:
         masks = present @ _MASK_BITS
         dist = np.empty((len(markers), k))
         idx = np.empty((len(markers), k), dtype=np.int64)
-        for mask in np.unique(masks):
-            rows = np.flatnonzero(masks == mask)
-            keep = present[rows[0]]
-            if masked_cells is not None:
-                made = masked_cells.made(int(mask)) if live else None
-                if made is not None:
-                    dist[rows], idx[rows] = self._cells_query(made, markers[rows], k, eps)
-                    continue
-                f = aligned[rows][:, keep].reshape(len(rows), -1)
-                dist[rows], idx[rows] = masked_cells.query(keep, f, k, eps, int(mask))
+        groups: dict[int, list[int]] = {}
+        for row, mask in enumerate(masks.tolist()):
+            groups.setdefault(mask, []).append(row)
+        aligned = None
+        for mask, members in groups.items():
+            rows = np.array(members)
+            keep = present[members[0]]
+            made = masked_cells.made(mask) if live and masked_cells is not None else None
+            if made is not None:
+                dist[rows], idx[rows] = self._cells_query(made, markers[rows], k, eps)
                 continue
+            aligned = self._aligned(markers) if aligned is None else aligned
             f = aligned[rows][:, keep].reshape(len(rows), -1)
+            if masked_cells is not None:
+                dist[rows], idx[rows] = masked_cells.query(keep, f, k, eps, mask)
+                continue
             tree = self._tree(int(mask), keep)
             dist[rows], idx[rows] = tree.query(f, k, eps, self._scans(eps, tree))
         return (dist[0], idx[0]) if single else (dist, idx)
+
+    def _aligned(self, markers: np.ndarray) -> np.ndarray:
+        """Observations (b, 8, 3) world meters, NaN = missing, in the canonical frame of
+        their own markers present (`align_markers`, compiled with the kernels)."""
+        if kernels_enabled():
+            return _kernels().aligned_markers_kernel(
+                np.ascontiguousarray(markers), self.scale_by_tibia
+            )
+        return align_markers(markers, scale_by_tibia=self.scale_by_tibia)[0]
 
     def _cells_query(
         self, cells: VoronoiCells, markers: np.ndarray, k: int, eps: float
