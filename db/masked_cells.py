@@ -11,7 +11,7 @@ poses, a freeze of the live capture. Here nothing waits:
   1e-7 m), and queues the mask;
 - one background thread makes the mask's table: its features (`marker_features_kernel`)
   and their Voronoi cells around the full table's centroids seen with the same markers
-  (`VoronoiCells.around`, a nearest-centroid assignment, no k-means): about 0.8 s at 10^6
+  (`VoronoiCells.around`, a nearest-centroid assignment, no k-means): 1.2-2.2 s at 10^6
   poses, after which the mask's queries read those cells (`cells_kernel`, the same
   answers as a scan of the masked table).
 
