@@ -147,6 +147,36 @@ class VoronoiCells:
             order,
         )
 
+    def nearest(self, queries: np.ndarray, k: int, eps: float) -> tuple[np.ndarray, np.ndarray]:
+        """The k nearest features to queries (b, D) meters, in the table's dimensions
+        (`samba.db.kernels.cells_kernel`): (distances (b, k) meters, table rows (b, k))."""
+        from samba.db.kernels import cells_kernel  # numba only when a search runs
+
+        found, stored = cells_kernel(*self._searched, queries, k, float(eps))
+        return found, self.rows[stored]
+
+    def nearest_to_markers(
+        self, markers: np.ndarray, scale_by_tibia: bool, k: int, eps: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """`nearest` of observations (b, 8, 3) world meters that share the markers present
+        (NaN = missing) these cells hold, aligned in the same compiled call
+        (`nearest_poses_kernel`): (distances (b, k) meters, table rows (b, k))."""
+        from samba.db.kernels import nearest_poses_kernel
+
+        return nearest_poses_kernel(
+            np.ascontiguousarray(markers),
+            scale_by_tibia,
+            *self._searched,
+            self.rows,
+            k,
+            float(eps),
+        )
+
+    @property
+    def _searched(self) -> tuple[np.ndarray, ...]:
+        """What the cells' search kernels read, in their order."""
+        return (self.features, self.starts, self.centroids, self.between, self.radii, self.order)
+
     @property
     def table_centroids(self) -> np.ndarray:
         """The centroids (cells, D) with their dimensions in the table's order."""

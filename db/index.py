@@ -193,18 +193,7 @@ class _Tree:
             cells = self.cells
 
             def search(part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-                d, i = kernels.cells_kernel(
-                    cells.features,
-                    cells.starts,
-                    cells.centroids,
-                    cells.between,
-                    cells.radii,
-                    cells.order,
-                    part,
-                    k,
-                    float(eps),
-                )
-                return d, cells.rows[i]
+                return cells.nearest(part, k, eps)
 
         workers = usable_cores()
         if len(f) < THREADED_BATCH or workers == 1:
@@ -346,13 +335,13 @@ class PoseIndex:
         present = ~np.isnan(markers).any(axis=-1)
         live = kernels_enabled() and len(markers) < THREADED_BATCH
         if live and present.all():
-            dist, idx = self._cells_query(self._full.cells, markers, k, eps)
+            dist, idx = self._full.cells.nearest_to_markers(markers, self.scale_by_tibia, k, eps)
             return (dist[0], idx[0]) if single else (dist, idx)
         masked_cells = self._masked_cells()
         if live and len(markers) == 1 and masked_cells is not None:  # a live frame
             made = masked_cells.made(int(present[0] @ _MASK_BITS))
             if made is not None:
-                dist, idx = self._cells_query(made, markers, k, eps)
+                dist, idx = made.nearest_to_markers(markers, self.scale_by_tibia, k, eps)
                 return (dist[0], idx[0]) if single else (dist, idx)
         if present.all():
             f = self._aligned(markers).reshape(len(markers), -1)
@@ -372,7 +361,8 @@ class PoseIndex:
             keep = present[members[0]]
             made = masked_cells.made(mask) if live and masked_cells is not None else None
             if made is not None:
-                dist[rows], idx[rows] = self._cells_query(made, markers[rows], k, eps)
+                found = made.nearest_to_markers(markers[rows], self.scale_by_tibia, k, eps)
+                dist[rows], idx[rows] = found
                 continue
             aligned = self._aligned(markers) if aligned is None else aligned
             f = aligned[rows][:, keep].reshape(len(rows), -1)
@@ -391,26 +381,6 @@ class PoseIndex:
                 np.ascontiguousarray(markers), self.scale_by_tibia
             )
         return align_markers(markers, scale_by_tibia=self.scale_by_tibia)[0]
-
-    def _cells_query(
-        self, cells: VoronoiCells, markers: np.ndarray, k: int, eps: float
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """A live frame's query in one compiled call (`nearest_poses_kernel`): the k
-        nearest in `cells`, the table of the markers present in every one of markers
-        (b, 8, 3) world meters: (distances (b, k), table rows (b, k))."""
-        return _kernels().nearest_poses_kernel(
-            np.ascontiguousarray(markers),
-            self.scale_by_tibia,
-            cells.features,
-            cells.starts,
-            cells.centroids,
-            cells.between,
-            cells.radii,
-            cells.order,
-            cells.rows,
-            k,
-            float(eps),
-        )
 
     def _masked_cells(self) -> MaskedCells | None:
         """The masked cells (`samba.db.masked_cells`) that answer queries with markers

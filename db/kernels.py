@@ -125,14 +125,7 @@ def nearest_poses_kernel(
     of each stored one. Returns (distances (b, k) meters, table rows (b, k)), what
     `PoseIndex.query` returns, in one call (a live frame's query)."""
     b = markers.shape[0]
-    d = centroids.shape[1]
-    distances = np.empty((b, k))
-    indices = np.empty((b, k), dtype=np.int64)
-    best = np.empty(k)
-    rows = np.empty(k, dtype=np.int64)
-    scratch = np.empty((2, centroids.shape[0]))
-    query = np.empty(d, dtype=np.float32)
-    flat = np.empty(d)
+    queries = np.empty((b, centroids.shape[1]))
     present = np.empty(N_MARKERS, dtype=np.bool_)
     origin = np.empty(3)
     turn = np.empty(4)
@@ -146,14 +139,15 @@ def nearest_poses_kernel(
         for i in range(N_MARKERS):
             if present[i]:
                 for a in range(3):
-                    flat[slot] = aligned[i, a]
+                    queries[q, slot] = aligned[i, a]
                     slot += 1
-        for j in range(d):
-            query[j] = np.float32(flat[order[j]])
-        _search_cells(features, starts, centroids, between, radii, query, eps, best, rows, scratch)
-        distances[q] = np.sqrt(best)
+    distances, rows = cells_kernel(
+        features, starts, centroids, between, radii, order, queries, k, eps
+    )
+    indices = np.empty((b, k), dtype=np.int64)
+    for q in range(b):
         for j in range(k):
-            indices[q, j] = stored[rows[j]]
+            indices[q, j] = stored[rows[q, j]]
     return distances, indices
 
 

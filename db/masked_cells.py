@@ -33,7 +33,6 @@ import numpy as np
 from samba.body import HEADING_PAIRS, N_MARKERS, TIBIA_PAIRS
 from samba.db.cells import VoronoiCells
 from samba.db.kernels import (
-    cells_kernel,
     marker_features_kernel,
     projected_kernel,
     turned_centers_kernel,
@@ -75,18 +74,7 @@ class MaskedCells:
         if table is None and not self._projectable(keep):
             table = self.wait(keep)
         if table is not None:
-            found, stored = cells_kernel(
-                table.features,
-                table.starts,
-                table.centroids,
-                table.between,
-                table.radii,
-                table.order,
-                f,
-                k,
-                float(eps),
-            )
-            return found, table.rows[stored]
+            return table.nearest(f, k, eps)
         self.prepare(keep)
         pair = _heading_pair(keep)
         centers, radii = self._turned_centers(pair)

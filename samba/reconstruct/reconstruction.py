@@ -363,13 +363,10 @@ class Reconstructor:
 
     def _apply(self, solved: _Solved, i: int) -> np.ndarray:
         """Frame i's pose (39,), world, given the history."""
-        if not self._history:
+        target = self.prediction()
+        if target is None:
             return solved.offset[i]
-        if len(self._history) == 1:
-            target = self._history[0]
-        else:
-            target = 2.0 * self._history[0] - self._history[1]
-        return solved.offset[i] + solved.gain[i] @ (target - solved.anchor[i])
+        return solved.offset[i] + solved.gain[i] @ (target.reshape(-1) - solved.anchor[i])
 
     def _predict(self, markers: np.ndarray, present: np.ndarray) -> np.ndarray:
         """A pose (39,) for a frame that cannot be reconstructed."""

@@ -42,30 +42,8 @@ def affine_of(
     d = samples.shape[1]
     mean = weights @ samples
     weight = alpha * mask + betas
-    if variance_kept < 1.0 and shoulder_placed:
-        free = _shoulder_free(samples)
-        free_mean = weights @ free
-        free_cov = (free.T * weights) @ free - np.outer(free_mean, free_mean)
-        variances, free_vectors = np.linalg.eigh(free_cov)
-        _truncated_solution(
-            mean,
-            variances,
-            _from_shoulder_free(free_vectors),
-            variance_floor,
-            variance_kept,
-            rounding,
-            mask,
-            observed,
-            betas,
-            alpha,
-            weight,
-            target,
-            offset,
-            gain,
-        )
-        return
-    cov = (samples.T * weights) @ samples - np.outer(mean, mean)
     if variance_kept >= 1.0:
+        cov = (samples.T * weights) @ samples - np.outer(mean, mean)
         for i in range(d):
             cov[i, i] += variance_floor
         system = cov * weight
@@ -82,7 +60,7 @@ def affine_of(
         offset[:] = solution[:, 0]
         gain[:] = solution[:, 1:]
         return
-    variances, vectors = np.linalg.eigh(cov)
+    variances, vectors = _principal_axes(samples, weights, mean, shoulder_placed)
     _truncated_solution(
         mean,
         variances,
@@ -99,6 +77,24 @@ def affine_of(
         offset,
         gain,
     )
+
+
+@compiled
+def _principal_axes(
+    samples: np.ndarray, weights: np.ndarray, mean: np.ndarray, shoulder_placed: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """The weighted covariance's eigenvalues (c,) ascending and eigenvectors (39, c) of
+    samples (M, 39) about their `mean` (39,): in the 35 free coordinates when the samples
+    are `shoulder_placed` (see `affine_of`), else in all 39."""
+    if shoulder_placed:
+        free = _shoulder_free(samples)
+        free_mean = weights @ free
+        free_cov = (free.T * weights) @ free - np.outer(free_mean, free_mean)
+        variances, free_vectors = np.linalg.eigh(free_cov)
+        return variances, _from_shoulder_free(free_vectors)
+    cov = (samples.T * weights) @ samples - np.outer(mean, mean)
+    variances, vectors = np.linalg.eigh(cov)
+    return variances, np.ascontiguousarray(vectors)
 
 
 @compiled
