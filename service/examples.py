@@ -27,8 +27,9 @@ What is written (`EXAMPLE_FILES`), all synthetic and a few MB:
   above its legs;
 - `me.gltf`: a JSON glTF avatar whose buffer file `me.bin` is missing, which `samba
   export --avatar` refuses naming that file;
-- `keys.toml`: the nodes' keys file of the LAN example (`cam0.key`, `cam1.key`, which
-  the example draws itself).
+- `keys.toml`, `cam0.key`, `cam1.key`, `stages.toml`: a stage on a LAN, its two nodes'
+  keys (32 random bytes each, readable by their owner only), the keys file naming them
+  and a sessions file (one session, `stage1`, of `cameras.toml` and `store`).
 
 Images are JPEG (quality `JPEG_QUALITY`). Nothing is written over an existing file or
 folder unless `force`, which replaces them.
@@ -37,6 +38,7 @@ folder unless `force`, which replaces them.
 from __future__ import annotations
 
 import json
+import secrets
 import shutil
 import tempfile
 from collections.abc import Callable
@@ -45,7 +47,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from samba.base import FORCE_HINT, InputError, check_outputs, write_text_atomic
+from samba.base import (
+    FORCE_HINT,
+    InputError,
+    check_outputs,
+    write_bytes_atomic,
+    write_text_atomic,
+)
 from samba.body import BodyModel, scaled_to
 from samba.cameras import (
     board_poses,
@@ -112,6 +120,9 @@ EXAMPLE_FILES = (
     "ue_avatar.glb",
     "me.gltf",
     "keys.toml",
+    "cam0.key",
+    "cam1.key",
+    "stages.toml",
 )
 """What `write_examples` writes in its folder: files and folders."""
 KEYS_TOML = """[[node]]
@@ -121,6 +132,13 @@ cameras = [0]
 [[node]]
 key_file = "cam1.key"
 cameras = [1]
+"""
+STAGES_TOML = """# the sessions of samba serve --config (docs/live.md)
+[[session]]
+name = "stage1"
+calibration = "cameras.toml"
+database = "store"
+fps = 30
 """
 NEXT_COMMANDS = (
     "samba calibrate left middle right --board checkerboard:9x6:0.08 -o calib.toml",
@@ -246,9 +264,18 @@ def _avatars(root: Path) -> list[tuple[Path, str]]:
     ]
 
 
-def _keys(root: Path) -> list[tuple[Path, str]]:
+def _lan_stage(root: Path) -> list[tuple[Path, str]]:
+    """keys.toml naming two fresh node keys (mode 0600), and stages.toml."""
     write_text_atomic(root / "keys.toml", KEYS_TOML)
-    return [(root / "keys.toml", "which node key signs for which camera (LAN example)")]
+    written = [(root / "keys.toml", "which node key signs for which camera (LAN example)")]
+    for node in range(2):
+        key = root / f"cam{node}.key"
+        write_bytes_atomic(key, secrets.token_bytes(32))
+        key.chmod(0o600)
+        written.append((key, f"node {node}'s key, 32 random bytes, readable by you only"))
+    write_text_atomic(root / "stages.toml", STAGES_TOML)
+    written.append((root / "stages.toml", "one session, stage1, for samba serve --config"))
+    return written
 
 
 def _images(folder: Path, frames: np.ndarray | list[np.ndarray], prefix: str = "") -> Path:
@@ -270,5 +297,5 @@ _WRITERS: tuple[Callable[[Path], list[tuple[Path, str]]], ...] = (
     _studio_walk,
     _quadruped,
     _avatars,
-    _keys,
+    _lan_stage,
 )

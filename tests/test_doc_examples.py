@@ -13,8 +13,8 @@ print every error line the page shows, word for word (`doc_examples.Command.erro
 example of an error fails for the reason the page gives, not for another that names the
 same file (an input `samba examples` does not write). Blocks that read the real data are
 skipped when it is absent, and so are the later blocks that name a path a skipped block
-named, unless `samba examples` wrote it (`mocap-db`, not `store`). The real-footage
-page's captures take about 3 min (four 1080x1920 videos).
+named, unless `samba examples` wrote it (`mocap-db`, not `store`). `~` is a folder of
+the test's own. The real-footage page's captures take about 3 min (four 1080x1920 videos).
 """
 
 from __future__ import annotations
@@ -220,6 +220,8 @@ def test_every_command_example_runs_as_printed(
         (tmp_path / "shared" / "data").symlink_to(data.resolve())
     env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
     env["PYTHONUNBUFFERED"] = "1"
+    env["HOME"] = str(tmp_path / "home")  # what an example writes under ~ stays here
+    (tmp_path / "home").mkdir()
     runner = _Runner(folder, env)
     plan = _plan(group, {path.name for path in examples_dir.iterdir()}, data is not None)
     with _one_server_at_a_time(group):
