@@ -58,6 +58,8 @@ _INEXACT_SHARE = 8
 """The reader's kernel leaves at most one number in this many to Python's `float` (more
 than 15 significant digits, or beyond 10^22 either way: a Daz export writes two such in
 every frame, 3.88251e-19) before it hands the file to `np.loadtxt`."""
+_GATHERED_TOKEN_BYTES = 40
+"""Longest number `_convert_inexact` converts among the others (a (k, width) byte table)."""
 
 
 @dataclass(frozen=True)
@@ -512,15 +514,19 @@ def _longest_line(buffer: np.ndarray) -> int:
 
 def _convert_inexact(buffer: np.ndarray, values: np.ndarray, inexact: np.ndarray) -> None:
     """Set the numbers the kernel left, `inexact` (k, 3) rows of (slot in `values`, first
-    and past-last byte in `buffer`), by Python's correctly rounded `float`, as
-    `np.loadtxt` reads them."""
-    converted: dict[bytes, float] = {}
-    for slot, start, end in inexact.tolist():
-        token = buffer[start:end].tobytes()
-        value = converted.get(token)
-        if value is None:
-            value = converted[token] = float(token)
-        values[slot] = value
+    and past-last byte in `buffer`), correctly rounded as Python's `float` and `np.loadtxt`
+    read them: in one numpy conversion of their bytes (a number longer than
+    `_GATHERED_TOKEN_BYTES` by `float` alone)."""
+    long = inexact[:, 2] - inexact[:, 1] > _GATHERED_TOKEN_BYTES
+    for slot, start, end in inexact[long].tolist():
+        values[slot] = float(buffer[start:end].tobytes())
+    slots, starts, ends = inexact[~long].T
+    if len(slots):
+        width = int((ends - starts).max())
+        at = starts[:, None] + np.arange(width)
+        tokens = buffer[np.minimum(at, len(buffer) - 1)]
+        tokens[at >= ends[:, None]] = 0  # NUL ends a numpy bytes string
+        values[slots] = tokens.view(f"S{width}").ravel().astype(np.float64)
 
 
 def _kernels() -> ModuleType:

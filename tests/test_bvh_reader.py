@@ -98,6 +98,8 @@ NUMBERS = [
     "2e-400",
     "0e99999999",
     "1e0000000000000000003",
+    "-0.12345678901234567890123456789012345678901234567890",  # beyond the gathered width
+    "1234567890123456789012345678901234567890.5e-30",
 ]
 """Forms of numbers and the edges of the exact one-operation conversion (10^22, 2^53)."""
 
