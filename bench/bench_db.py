@@ -50,7 +50,7 @@ from samba.body.take import Take  # noqa: E402
 from samba.db.index import APPROXIMATE_EPS, SCAN_LIMIT, PoseIndex, marker_features  # noqa: E402
 from samba.db.store import PoseStore  # noqa: E402
 from samba.ingest import reader_kernels  # noqa: E402
-from samba.ingest.batch import import_paths  # noqa: E402
+from samba.ingest.batch import READERS, import_paths  # noqa: E402
 from samba.ingest.bvh import _read_table as read_motion_table  # noqa: E402
 from samba.ingest.bvh import parse_bvh  # noqa: E402
 from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
@@ -150,7 +150,8 @@ def bench_import(files: list[Path], repeats: int = 3) -> np.ndarray:
     ]
     print_table(
         f"Import: {len(files)} CMU files, {source_frames} source frames -> {len(poses)} poses"
-        f" at 30 fps (one core, best of {repeats} alternating rounds)",
+        f" at 30 fps (one thread, but samba db import's {READERS} reading threads; best of"
+        f" {repeats} alternating rounds)",
         ["stage", "seconds", "source frames/s", "poses/s", "rate vs np.loadtxt"],
         rows,
     )

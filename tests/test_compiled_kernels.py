@@ -4,6 +4,8 @@ a first run prints, `samba warmup`, and the numpy switch."""
 from __future__ import annotations
 
 import io
+import threading
+import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -32,6 +34,27 @@ def test_a_first_run_says_it_compiles_once_and_later_runs_say_nothing(tmp_path: 
     quiet = io.StringIO()
     again.warm_up(quiet)
     assert quiet.getvalue() == "" and calls == [1, 2]
+
+
+@pytest.mark.skipif(not kernels_enabled(), reason="numba kernels are off")
+def test_threads_warming_one_set_together_compile_it_once(tmp_path: Path) -> None:
+    calls = []
+    entered = threading.Event()
+
+    def slow_compile() -> None:
+        entered.set()
+        time.sleep(0.2)
+        calls.append(1)
+
+    kernels = KernelSet("test", [fake_kernel(tmp_path / "k.nbi")], [slow_compile], 7.0)
+    out = io.StringIO()
+    first = threading.Thread(target=kernels.warm_up, args=(out,))
+    first.start()
+    assert entered.wait(30.0)
+    kernels.warm_up(out)  # waits for the first thread's compile
+    first.join()
+    assert calls == [1] and kernels.warmed
+    assert out.getvalue() == "samba: compiling test kernels, once: ~7 s\n"
 
 
 def test_numpy_switch_turns_every_kernel_off(

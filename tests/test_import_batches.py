@@ -9,6 +9,8 @@ import os
 import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +21,7 @@ import samba.db.store as store_module
 from samba.db.pose_files import POSE_BYTES
 from samba.db.store import PoseStore
 from samba.ingest import import_paths, load_bvh_take
+from samba.ingest.batch import READERS, ImportInterrupted, read_file
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT = 120.0
@@ -174,3 +177,50 @@ def test_a_crash_inside_a_group_commit_leaves_the_previous_groups_whole(
     assert [t.name for t in store.takes] == [f.stem for f in bvh_files]
     assert_whole_files(store, bvh_files)
     assert (path / f"poses-{store.data_name}.f32").stat().st_size == len(store) * POSE_BYTES
+
+
+def test_files_read_ahead_in_threads_are_committed_in_file_order(
+    empty: PoseStore, bvh_files: list[Path]
+) -> None:
+    second_read = threading.Event()
+
+    def first_waits_for_second(path: Path, options: object) -> object:
+        if path == bvh_files[0]:  # finishes only after a later file was read
+            assert second_read.wait(60.0), "the second file was not read beside the first"
+        take = read_file(path, None)
+        if path == bvh_files[1]:
+            second_read.set()
+        return take
+
+    results = import_paths(
+        empty, bvh_files, progress=False, commit_files=2, read=first_waits_for_second
+    )
+    assert [r.status for r in results] == ["added"] * 5
+    assert [t.name for t in empty.takes] == [f.stem for f in bvh_files]
+    assert_whole_files(empty, bvh_files)
+
+
+def test_ctrl_c_while_files_are_read_ahead_starts_no_more_files(
+    empty: PoseStore, tmp_path: Path
+) -> None:
+    files = []
+    for seed in range(40):
+        path = tmp_path / f"take_{seed:02d}.bvh"
+        path.write_text(humanoid_bvh(frames=6, seed=seed))
+        files.append(path)
+    started: list[Path] = []
+
+    def interrupted_at_third(path: Path, options: object) -> object:
+        started.append(path)
+        if path == files[2]:
+            raise KeyboardInterrupt
+        return read_file(path, None)
+
+    with pytest.raises(ImportInterrupted) as caught:
+        import_paths(empty, files, progress=False, commit_files=1, read=interrupted_at_third)
+    assert [r.status for r in caught.value.done] == ["added", "added"]
+    assert len(started) <= 3 + 2 * READERS  # the files queued when Ctrl-C came are dropped
+    count = len(started)
+    time.sleep(0.2)
+    assert len(started) == count  # and no reader goes on
+    assert [t.name for t in empty.takes] == [f.stem for f in files[:2]]

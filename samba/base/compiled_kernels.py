@@ -17,6 +17,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -74,6 +75,7 @@ class KernelSet:
     examples: Sequence[Callable[[], object]]
     estimate_s: float
     warmed: bool = field(default=False, init=False)
+    _warming: threading.Lock = field(default_factory=threading.Lock, init=False, repr=False)
 
     def is_cached(self) -> bool:
         """Whether numba's disk cache holds every kernel of the set (so warming loads it
@@ -88,17 +90,20 @@ class KernelSet:
     def warm_up(self, stream: TextIO | None = None) -> float:
         """Compile or load the kernels, once per process; returns the seconds it took
         (0 when already warm or kernels are off). Prints one line to `stream` (default
-        stderr) before a compile."""
+        stderr) before a compile. Thread-safe: a second caller waits for the first."""
         if self.warmed or not kernels_enabled():
             return 0.0
-        if not self.is_cached():
-            print(
-                f"samba: compiling {self.name} kernels, once: ~{self.estimate_s:.0f} s",
-                file=stream or sys.stderr,
-                flush=True,
-            )
-        start = time.perf_counter()
-        for example in self.examples:
-            example()
-        self.warmed = True
-        return time.perf_counter() - start
+        with self._warming:
+            if self.warmed:
+                return 0.0
+            if not self.is_cached():
+                print(
+                    f"samba: compiling {self.name} kernels, once: ~{self.estimate_s:.0f} s",
+                    file=stream or sys.stderr,
+                    flush=True,
+                )
+            start = time.perf_counter()
+            for example in self.examples:
+                example()
+            self.warmed = True
+            return time.perf_counter() - start
