@@ -270,8 +270,7 @@ def _lan_stage(root: Path) -> list[tuple[Path, str]]:
     written = [(root / "keys.toml", "which node key signs for which camera (LAN example)")]
     for node in range(2):
         key = root / f"cam{node}.key"
-        write_bytes_atomic(key, secrets.token_bytes(32))
-        key.chmod(0o600)
+        write_bytes_atomic(key, secrets.token_bytes(32), mode=0o600)
         written.append((key, f"node {node}'s key, 32 random bytes, readable by you only"))
     write_text_atomic(root / "stages.toml", STAGES_TOML)
     written.append((root / "stages.toml", "one session, stage1, for samba serve --config"))

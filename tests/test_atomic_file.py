@@ -22,6 +22,15 @@ def test_written_files_get_the_mode_a_plain_file_would(tmp_path: Path) -> None:
     assert mode == stat.S_IMODE((tmp_path / "plain.txt").stat().st_mode) == 0o640
 
 
+def test_a_secret_gets_its_mode_also_over_a_readable_file(tmp_path: Path) -> None:
+    key = tmp_path / "cam0.key"
+    key.write_bytes(b"old")
+    key.chmod(0o644)
+    write_bytes_atomic(key, b"new secret", mode=0o600)
+    assert stat.S_IMODE(key.stat().st_mode) == 0o600
+    assert key.read_bytes() == b"new secret"
+
+
 def test_a_failed_write_keeps_the_old_file_and_leaves_no_temporary(tmp_path: Path) -> None:
     path = tmp_path / "take.usda"
     write_bytes_atomic(path, b"old")

@@ -3,6 +3,7 @@ over without --force, bad folders refused in one line."""
 
 from __future__ import annotations
 
+import stat
 from pathlib import Path
 
 import pytest
@@ -90,6 +91,9 @@ def test_the_examples_are_written_then_refused_then_replaced(
     with pytest.raises(InputError, match=r"buffer 0: cannot read its file .*me\.bin"):
         load_avatar(str(folder / "me.gltf"))
     assert not (folder / "me.bin").exists()
+    for key in ("cam0.key", "cam1.key"):
+        assert stat.S_IMODE((folder / key).stat().st_mode) == 0o600
+        assert len((folder / key).read_bytes()) == 32
     size = sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
     assert size < 12e6
 

@@ -14,18 +14,20 @@ def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
     write_bytes_atomic(path, text.encode("utf-8"))
 
 
-def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:
-    """Write `data` to `path` atomically (see `atomic_path`)."""
-    with atomic_path(path) as tmp:
+def write_bytes_atomic(path: str | os.PathLike[str], data: bytes, mode: int | None = None) -> None:
+    """Write `data` to `path` atomically, with `mode` as `atomic_path` takes it."""
+    with atomic_path(path, mode) as tmp:
         tmp.write_bytes(data)
 
 
 @contextmanager
-def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike[str], mode: int | None = None) -> Iterator[Path]:
     """A temporary path beside `path`, with the same suffix, for a writer that needs a
     file name (USD, for one); on normal exit it replaces `path` with `os.replace`, on
-    any exception it is removed and `path` is left as it was. The file gets the mode
-    a plainly created file would (0666 less the umask), not the temporary file's 0600."""
+    any exception it is removed and `path` is left as it was. The file gets `mode`, or
+    when None the mode a plainly created file would (0666 less the umask); it is never
+    seen with another (the temporary file is 0600 until then), so a secret written with
+    mode 0o600 is never readable by others."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(
         dir=path.resolve().parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}"
@@ -33,7 +35,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     os.close(fd)
     try:
         yield Path(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, 0o666 & ~_umask() if mode is None else mode)
         os.replace(tmp, path)
     except BaseException:
         with suppress(FileNotFoundError):
