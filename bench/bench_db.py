@@ -51,9 +51,9 @@ from samba.db.index import APPROXIMATE_EPS, SCAN_LIMIT, PoseIndex, marker_featur
 from samba.db.store import PoseStore  # noqa: E402
 from samba.ingest import reader_kernels  # noqa: E402
 from samba.ingest.batch import READERS, import_paths  # noqa: E402
-from samba.ingest.bvh import _read_table as read_motion_table  # noqa: E402
 from samba.ingest.bvh import parse_bvh  # noqa: E402
 from samba.ingest.bvh_take import load_bvh_take  # noqa: E402
+from samba.ingest.motion_table import read_table as read_motion_table  # noqa: E402
 
 K = 10
 SCANNED_UP_TO = 200_000

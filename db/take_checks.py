@@ -70,8 +70,9 @@ def take_problems(poses: np.ndarray, fps: float) -> list[str]:
         )
         return problems
     low, high = BONE_RANGE_M
-    for bone, (a, b) in BONES.items():
-        length = float(np.median(np.linalg.norm(poses[:, b] - poses[:, a], axis=-1)))
+    ends = np.array(list(BONES.values()))
+    medians = np.median(np.linalg.norm(poses[:, ends[:, 1]] - poses[:, ends[:, 0]], axis=-1), 0)
+    for bone, length in zip(BONES, medians.tolist(), strict=True):
         if not low <= length <= high:
             problems.append(
                 f"the {bone} is {length:.3f} m long (median over the take), outside "

@@ -7,7 +7,7 @@ tools write theirs (`rig_variant`); skeletons sketched as joint lists, written a
 """
 
 from samba.ingest.batch import FileResult, expand_paths, import_paths, read_file
-from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh, reader_kernels
+from samba.ingest.bvh import BvhFile, BvhJoint, parse_bvh, read_bvh
 from samba.ingest.bvh_take import BvhImportOptions, load_bvh_take
 from samba.ingest.c3d_take import MarkerTake, read_c3d
 from samba.ingest.errors import BvhError, C3dError, RigError
@@ -15,6 +15,7 @@ from samba.ingest.joint_centres import JointWidths, reference_joints
 from samba.ingest.marker_sets import PLUG_IN_GAIT, MarkerSet
 from samba.ingest.marker_takes import read_marker_take, read_recorded_markers
 from samba.ingest.mcap_take import POSE_TOPIC, SUBJECT_METADATA, TAKE_METADATA, read_take
+from samba.ingest.motion_table import reader_kernels
 from samba.ingest.normalize import floor_height
 from samba.ingest.resolver import HumanoidMap, SkeletonTree, name_kind, resolve_humanoid
 from samba.ingest.rig_sketches import QUADRUPED, SketchJoint, rest_pose_bvh, unnamed_rig

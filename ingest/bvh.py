@@ -12,20 +12,25 @@ without tabs. Position channels replace the matching component of the joint's OF
 from __future__ import annotations
 
 import functools
-import io
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from types import ModuleType
-from typing import NoReturn
 
 import numpy as np
 
-from samba.base import KernelSet, kernels_enabled
-from samba.body import euler_to_quaternions, forward_kinematics, whole_fps
+from samba.base import kernels_enabled
+from samba.body import (
+    euler_to_quaternions,
+    forward_kinematics,
+    sample_linear,
+    sample_rotations,
+    whole_fps,
+)
 from samba.ingest.errors import BvhError
 from samba.ingest.input_files import MAX_FILE_BYTES, quoted, read_input
+from samba.ingest.motion_table import PLAIN_NUMBER, compiled_reader, read_frames, read_table
 from samba.ingest.resolver import SkeletonTree
 
 _CHANNELS = {f"{axis}{kind}": (kind, axis) for axis in "XYZ" for kind in ("position", "rotation")}
@@ -36,7 +41,6 @@ _MOTION_BYTES = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE | re.IGNORE
 _HEAD_WINDOW = 4096
 """Bytes after the MOTION line in which `_parse_plain` looks for 'Frames:' and 'Frame
 Time:' (the full path reads files that put them further)."""
-_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 MAX_DEPTH = 256
 """Deepest nesting of joints read (a full-body rig with fingers nests about 30 deep)."""
 MAX_JOINTS = 10_000
@@ -49,17 +53,8 @@ _MAX_CHANNELS = 6
 """Most channels of one joint: three positions and three rotations."""
 _MAX_FRAME_DIGITS = 18
 """Most digits of 'Frames:' (a count beyond them is no count of frames a file holds)."""
-_LINE_BYTES_A_VALUE = 64
-"""Bytes a motion line may hold per value before `np.loadtxt` is not asked to read it (a
-line far longer than its values need is diagnosed without being read as numbers)."""
 _CACHED_HEADER_CHARS = 1_000_000
 """Longest hierarchy text whose parse is kept for the next file of the rig."""
-_INEXACT_SHARE = 8
-"""The reader's kernel leaves at most one number in this many to Python's `float` (more
-than 15 significant digits, or beyond 10^22 either way: a Daz export writes two such in
-every frame, 3.88251e-19) before it hands the file to `np.loadtxt`."""
-_GATHERED_TOKEN_BYTES = 40
-"""Longest number `_convert_inexact` converts among the others (a (k, width) byte table)."""
 
 
 @dataclass(frozen=True)
@@ -82,12 +77,16 @@ class BvhJoint:
 
 @dataclass(frozen=True)
 class BvhFile:
-    """A parsed BVH file: `joints` (parents first), `motion` (frames, channels) float64."""
+    """A parsed BVH file: `joints` (parents first), `n_frames` frames of motion, and
+    `motion` (rows, channels) float64: every frame, or the frames `held` only (ascending
+    frame indices (rows,) int64), when `parse_bvh` was asked for some (its `sample`)."""
 
     source: str
     joints: tuple[BvhJoint, ...]
     frame_time: float
     motion: np.ndarray
+    n_frames: int
+    held: np.ndarray | None = None
 
     @property
     def fps(self) -> float:
@@ -96,14 +95,13 @@ class BvhFile:
         return whole_fps(1.0 / self.frame_time)
 
     @property
-    def n_frames(self) -> int:
-        """Number of motion frames."""
-        return len(self.motion)
-
-    @property
     def names(self) -> tuple[str, ...]:
         """Joint names in hierarchy order (End Sites included)."""
         return tuple(j.name for j in self.joints)
+
+    def frames(self) -> np.ndarray:
+        """The frame indices (rows,) int64 of the rows of `motion`."""
+        return np.arange(self.n_frames) if self.held is None else self.held
 
     def skeleton(self) -> SkeletonTree:
         """The joint tree as the humanoid resolver reads it, posed as in the first frame
@@ -126,43 +124,138 @@ class BvhFile:
     def local_transforms(
         self, subset: list[int], frames: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Local transforms of a parent-closed joint subset over `frames` (default: all).
+        """Local transforms of a parent-closed joint subset over the held `frames` (frame
+        indices; default: all held).
 
         Returns (parents (J,) indices into the subset, rotations (n, J, 4) quaternions,
         translations (n, J, 3) in file units).
         """
-        motion = self.motion if frames is None else self.motion[frames]
-        position_in = {j: i for i, j in enumerate(subset)}
-        parents = np.array([position_in.get(self.joints[j].parent, -1) for j in subset])
+        motion = self.motion if frames is None else self.motion[self._rows(frames)]
+        layout = self._layout(subset)
         rotations = np.zeros((len(motion), len(subset), 4))
         rotations[..., 3] = 1.0
-        translations = np.empty((len(motion), len(subset), 3))
-        by_order: dict[str, tuple[list[int], list[list[int]]]] = {}
-        for i, j in enumerate(subset):
-            joint = self.joints[j]
-            translations[:, i] = joint.offset
-            axes, columns = "", []
-            for c, name in enumerate(joint.channels):
-                kind, axis = _CHANNELS[name]
-                if kind == "position":
-                    translations[:, i, "XYZ".index(axis)] = motion[:, joint.first_channel + c]
-                else:
-                    axes += axis
-                    columns.append(joint.first_channel + c)
-            if axes:
+        translations = np.repeat(layout.offsets[None], len(motion), axis=0)
+        by_order: dict[str, tuple[list[int], list[np.ndarray]]] = {}
+        for i in range(len(subset)):
+            for axis, column in enumerate(layout.position_columns[i]):
+                if column >= 0:
+                    translations[:, i, axis] = motion[:, column]
+            columns = layout.rotation_columns[i][layout.rotation_columns[i] >= 0]
+            if len(columns):
+                axes = "".join("XYZ"[a] for a in layout.rotation_axes[i][: len(columns)])
                 members, cols = by_order.setdefault(axes, ([], []))
                 members.append(i)
                 cols.append(columns)
         for axes, (members, cols) in by_order.items():
             rotations[:, members] = euler_to_quaternions(axes, motion[:, cols])
-        return parents, rotations, translations
+        return layout.parents, rotations, translations
 
     def positions(self, joints: list[int]) -> np.ndarray:
-        """World positions (n, len(joints), 3) of the given joint indices, in file units."""
+        """World positions (rows, len(joints), 3) of the given joint indices in the held
+        frames, in file units."""
+        return self.sampled_positions(joints, self.frames().astype(np.float64))
+
+    def sampled_positions(self, joints: list[int], times: np.ndarray) -> np.ndarray:
+        """World positions (m, len(joints), 3), in file units, of the joint indices
+        `joints` at fractional frames `times` (m,) (0 is the first frame; the frames either
+        side of each, `frames_either_side`, must be held): rotations interpolated as
+        quaternions on the shorter arc (normalised lerp), translations linearly.
+
+        Computed by `samba.ingest.kernels.sampled_positions_kernel` when kernels are on,
+        else by its numpy reference: `local_transforms`, then `sample_rotations`,
+        `sample_linear` and `forward_kinematics` (`samba.body`).
+        """
         subset = self.ancestry(joints)
-        parents, rotations, translations = self.local_transforms(subset)
-        world = forward_kinematics(parents, rotations, translations)
+        before, after, fractions = frames_either_side(times, self.n_frames)
+        if kernels_enabled():
+            layout = self._layout(subset)
+            world = compiled_reader().sampled_positions_kernel(
+                self.motion,
+                layout.parents,
+                layout.offsets,
+                layout.rotation_columns,
+                layout.rotation_axes,
+                layout.position_columns,
+                self._rows(before),
+                self._rows(after),
+                fractions,
+            )
+        else:
+            needed = np.union1d(before, after)
+            parents, rotations, translations = self.local_transforms(subset, needed)
+            local_times = np.searchsorted(needed, before) + fractions
+            world = forward_kinematics(
+                parents,
+                sample_rotations(rotations, local_times),
+                sample_linear(translations, local_times),
+            )
         return world[:, [subset.index(j) for j in joints]]
+
+    def _rows(self, frames: np.ndarray) -> np.ndarray:
+        """The rows (n,) of `motion` that hold the frames `frames` (n,) int; ValueError
+        for a frame not held."""
+        frames = np.asarray(frames, dtype=np.int64)
+        if self.held is None:
+            rows = frames
+            held = (frames >= 0) & (frames < self.n_frames)
+        else:
+            rows = np.minimum(np.searchsorted(self.held, frames), len(self.held) - 1)
+            held = self.held[rows] == frames
+        if not held.all():
+            raise ValueError(f"{self.source}: frame {frames[~held][0]} was not read")
+        return rows
+
+    def _layout(self, subset: list[int]) -> _ChannelLayout:
+        """How the channels of a parent-closed joint subset drive it (`_ChannelLayout`)."""
+        position_in = {j: i for i, j in enumerate(subset)}
+        layout = _ChannelLayout(
+            parents=np.array([position_in.get(self.joints[j].parent, -1) for j in subset]),
+            offsets=np.array([self.joints[j].offset for j in subset], dtype=np.float64),
+            rotation_columns=np.full((len(subset), 3), -1),
+            rotation_axes=np.zeros((len(subset), 3), dtype=np.int64),
+            position_columns=np.full((len(subset), 3), -1),
+        )
+        for i, j in enumerate(subset):
+            joint = self.joints[j]
+            turns = 0
+            for c, name in enumerate(joint.channels):
+                kind, axis = _CHANNELS[name]
+                if kind == "position":
+                    layout.position_columns[i, "XYZ".index(axis)] = joint.first_channel + c
+                else:
+                    layout.rotation_columns[i, turns] = joint.first_channel + c
+                    layout.rotation_axes[i, turns] = "XYZ".index(axis)
+                    turns += 1
+        return layout
+
+
+@dataclass(frozen=True)
+class _ChannelLayout:
+    """The channels of J joints as arrays (`samba.ingest.kernels.sampled_positions_kernel`):
+    `parents` (J,) indices among them (-1 for a root), rest `offsets` (J, 3) in file units,
+    `rotation_columns` (J, 3) the motion columns of the rotations in order (-1 past the
+    last) about `rotation_axes` (J, 3) (0, 1, 2 for X, Y, Z), `position_columns` (J, 3) the
+    column replacing each component of the offset (-1 for none)."""
+
+    parents: np.ndarray
+    offsets: np.ndarray
+    rotation_columns: np.ndarray
+    rotation_axes: np.ndarray
+    position_columns: np.ndarray
+
+
+def frames_either_side(
+    times: np.ndarray, n_frames: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The frames (m,) int64 before and after each fractional frame of `times` (m,),
+    clipped to the `n_frames` frames, and the fraction (m,) of the way between them: a time
+    within 1e-9 of a whole frame is that frame (before = after, fraction 0)."""
+    times = np.clip(np.asarray(times, dtype=np.float64), 0.0, n_frames - 1)
+    before = np.minimum(np.floor(times + 1e-9).astype(np.int64), n_frames - 1)
+    fractions = np.clip(times - before, 0.0, 1.0)
+    fractions[fractions <= 1e-9] = 0.0
+    after = np.where(fractions > 0, np.minimum(before + 1, n_frames - 1), before)
+    return before, after, fractions
 
 
 def read_bvh(path: str | Path, max_bytes: int = MAX_FILE_BYTES) -> BvhFile:
@@ -171,10 +264,23 @@ def read_bvh(path: str | Path, max_bytes: int = MAX_FILE_BYTES) -> BvhFile:
     return parse_bvh(read_input(path, max_bytes, BvhError), source=str(path))
 
 
-def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
-    """Parse BVH text (bytes or str); `source` names it in error messages."""
+SampleTimes = Callable[[int, float], np.ndarray]
+"""What a reader will sample of a file of n frames at f frames per second: (n, f) ->
+fractional frame indices (m,) (`parse_bvh`'s `sample`)."""
+
+
+def parse_bvh(
+    data: bytes | str, source: str = "<bvh>", sample: SampleTimes | None = None
+) -> BvhFile:
+    """Parse BVH text (bytes or str); `source` names it in error messages.
+
+    With `sample`, only the frames it needs are converted to numbers: the first, and the
+    frames either side of each of its times (`frames_either_side`), which the result
+    holds (`BvhFile.held`); every other frame is checked for its count of values and its
+    characters (`samba.ingest.motion_table`).
+    """
     if isinstance(data, bytes):
-        plain = _parse_plain(data, source)
+        plain = _parse_plain(data, source, sample)
         if plain is not None:
             return plain
         if b"\x00" in data:
@@ -205,15 +311,26 @@ def parse_bvh(data: bytes | str, source: str = "<bvh>") -> BvhFile:
     frames, frame_time, offset, first_line = _parse_motion_header(
         text, motion.end(), header.count("\n") + 1, source
     )
-    motion_data = _parse_frames(text[offset:], first_line, frames, n_channels, source)
-    return BvhFile(source=source, joints=joints, frame_time=frame_time, motion=motion_data)
+    held = _held_frames(sample, frames, frame_time)
+    motion_data = read_frames(text[offset:], first_line, frames, n_channels, source, held)
+    return BvhFile(source, joints, frame_time, motion_data, frames, held)
 
 
-def _parse_plain(data: bytes, source: str) -> BvhFile | None:
+def _held_frames(sample: SampleTimes | None, frames: int, frame_time: float) -> np.ndarray | None:
+    """The frames (ascending int64) of `frames` that `sample` needs, with the first; None
+    (all) without `sample`."""
+    if sample is None:
+        return None
+    times = sample(frames, whole_fps(1.0 / frame_time))
+    return np.union1d(np.concatenate(frames_either_side(times, frames)[:2]), [0])
+
+
+def _parse_plain(data: bytes, source: str, sample: SampleTimes | None) -> BvhFile | None:
     """`data` parsed without decoding or copying its motion section, for the usual file:
     ASCII, LF or CRLF line ends, a sound hierarchy and header, frames of plain numbers
-    that the compiled reader reads (`_read_table`). None for anything else, which
-    `parse_bvh`'s full path then parses or names the problem of (with the line)."""
+    that the compiled reader reads (`read_table`), `sample` as in `parse_bvh`. None for
+    anything else, which `parse_bvh`'s full path then parses or names the problem of (with
+    the line)."""
     if not kernels_enabled() or not data.isascii():
         return None
     motion = _MOTION_BYTES.search(data)
@@ -233,10 +350,14 @@ def _parse_plain(data: bytes, source: str) -> BvhFile | None:
     if offset >= len(head) and len(head) < len(data):
         return None  # 'Frame Time:' may go on past the window
     n_channels = sum(len(j.channels) for j in joints)
-    table = _read_table(np.frombuffer(data, dtype=np.uint8, offset=offset), frames, n_channels)
-    if table is None or table.shape != (frames, n_channels) or not np.isfinite(table).all():
+    if not n_channels:
         return None
-    return BvhFile(source=source, joints=joints, frame_time=frame_time, motion=table)
+    held = _held_frames(sample, frames, frame_time)
+    buffer = np.frombuffer(data, dtype=np.uint8, offset=offset)
+    table = read_table(buffer, frames, n_channels, held)
+    if table is None:
+        return None
+    return BvhFile(source, joints, frame_time, table, frames, held)
 
 
 def _hierarchy(header: str, source: str) -> tuple[BvhJoint, ...]:
@@ -302,7 +423,7 @@ class _Tokens:
     def number(self, what: str, limit: float = math.inf) -> float:
         line = self.line
         token = self.take(what)
-        if not _NUMBER.match(token):
+        if not PLAIN_NUMBER.match(token):
             raise BvhError(self.source, f"{what}: {quoted(token)} is not a number", line)
         value = float(token)
         if not math.isfinite(value) or abs(value) > limit:
@@ -456,144 +577,10 @@ def _parse_motion_header(
     frames = int(frames_text)
     if frames <= 0:
         raise BvhError(source, "the file has no frames (Frames: 0)", frames_line)
-    if not _NUMBER.match(time_text) or not 1e-6 <= float(time_text) < 10:
+    if not PLAIN_NUMBER.match(time_text) or not 1e-6 <= float(time_text) < 10:
         raise BvhError(
             source,
             f"frame time {quoted(time_text)} is not a duration in seconds (1e-6 up to 10)",
             time_line,
         )
     return frames, float(time_text), min(pos, len(text)), line_no + 1
-
-
-def _parse_frames(
-    body: str, first_line: int, frames: int, n_channels: int, source: str
-) -> np.ndarray:
-    """The (frames, n_channels) motion array from the data lines starting at `first_line`:
-    read by the compiled reader, or else by `np.loadtxt`, or else diagnosed."""
-    motion = None
-    if n_channels:
-        buffer = np.frombuffer(body.encode("utf-8"), dtype=np.uint8)
-        motion = _read_table(buffer, frames, n_channels)
-        if motion is None and _longest_line(buffer) <= _LINE_BYTES_A_VALUE * (n_channels + 1):
-            motion = _read_numbers(body)
-    if motion is None or motion.shape != (frames, n_channels) or not np.isfinite(motion).all():
-        _diagnose_frames(body.split("\n"), first_line, frames, n_channels, source)
-    return motion
-
-
-def _read_table(buffer: np.ndarray, frames: int, n_columns: int) -> np.ndarray | None:
-    """The (rows, n_columns) float64 table of plain decimal numbers in `buffer` (uint8
-    bytes), one row per non-blank line, read by the compiled kernel
-    (`samba.ingest.kernels`): the same floats as `np.loadtxt`. None when the kernel is off
-    or the text is anything else (NaN, a word, a short row, more than `frames` rows): the
-    caller then reads it with `_read_numbers` and diagnoses it."""
-    if not kernels_enabled():
-        return None
-    kernels = _kernels()
-    kernels.KERNELS.warm_up()
-    # A row takes at least two bytes a number: a header may claim more frames than the
-    # text can hold, and the table is sized by the text.
-    most_rows = min(frames, len(buffer) // (2 * n_columns) + 1)
-    most_inexact = 64 + most_rows * n_columns // _INEXACT_SHARE
-    status, rows, values, inexact = kernels.motion_table_kernel(
-        buffer, n_columns, most_rows, most_inexact
-    )
-    if status != kernels.READ:
-        return None
-    if len(inexact):
-        _convert_inexact(buffer, values, inexact)
-    return values[: rows * n_columns].reshape(rows, n_columns)
-
-
-def _longest_line(buffer: np.ndarray) -> int:
-    """Bytes of the longest line of `buffer` (uint8 text, LF line ends)."""
-    ends = np.flatnonzero(buffer == ord("\n"))
-    bounds = np.concatenate([[-1], ends, [len(buffer)]])
-    return int(np.diff(bounds).max()) - 1
-
-
-def _convert_inexact(buffer: np.ndarray, values: np.ndarray, inexact: np.ndarray) -> None:
-    """Set the numbers the kernel left, `inexact` (k, 3) rows of (slot in `values`, first
-    and past-last byte in `buffer`), correctly rounded as Python's `float` and `np.loadtxt`
-    read them: in one numpy conversion of their bytes (a number longer than
-    `_GATHERED_TOKEN_BYTES` by `float` alone)."""
-    long = inexact[:, 2] - inexact[:, 1] > _GATHERED_TOKEN_BYTES
-    for slot, start, end in inexact[long].tolist():
-        values[slot] = float(buffer[start:end].tobytes())
-    slots, starts, ends = inexact[~long].T
-    if len(slots):
-        width = int((ends - starts).max())
-        at = starts[:, None] + np.arange(width)
-        tokens = buffer[np.minimum(at, len(buffer) - 1)]
-        tokens[at >= ends[:, None]] = 0  # NUL ends a numpy bytes string
-        values[slots] = tokens.view(f"S{width}").ravel().astype(np.float64)
-
-
-def _kernels() -> ModuleType:
-    """`samba.ingest.kernels`, imported on first use: numba's import (0.2 s) stays off
-    commands that read no BVH."""
-    import samba.ingest.kernels as kernels
-
-    return kernels
-
-
-def reader_kernels() -> KernelSet:
-    """The BVH reader's compiled kernel (`samba.ingest.kernels.KERNELS`), for `samba
-    warmup`; importing it imports numba."""
-    return _kernels().KERNELS
-
-
-def _read_numbers(body: str) -> np.ndarray | None:
-    """Whitespace-separated numbers, one row per non-blank line, as a (rows, columns)
-    float64 array; None when the text does not read as such a table (a short row, a
-    word). Reads with `np.loadtxt`'s C parser: the reference of `_read_table`, which
-    reads what it cannot (NaN, infinity, other number forms) and when kernels are off."""
-    if not body.strip():  # loadtxt warns on empty input
-        return None
-    try:
-        with np.errstate(all="ignore"):
-            return np.loadtxt(io.StringIO(body), dtype=np.float64, ndmin=2, comments=None)
-    except ValueError:
-        return None
-
-
-def _diagnose_frames(
-    lines: list[str], first_line: int, frames: int, n_channels: int, source: str
-) -> NoReturn:
-    """Find the first offending data line and raise a `BvhError` naming it."""
-    row = 0
-    last = max((i for i, line in enumerate(lines) if line.strip()), default=-1)
-    for i, line in enumerate(lines):
-        values = line.split(maxsplit=n_channels)  # a longer line: its first values, the rest
-        if not values:
-            continue
-        where = first_line + i
-        if i == last and len(values) < n_channels and row < frames:
-            raise BvhError(
-                source,
-                f"file ends inside frame {row} ({len(values)} of {n_channels} values; truncated?)",
-                where,
-            )
-        if row >= frames:
-            raise BvhError(source, f"more frame lines than 'Frames: {frames}' declares", where)
-        for v in values[:n_channels]:
-            if not _NUMBER.match(v) and v.lower().lstrip("+-") not in ("nan", "inf", "infinity"):
-                raise BvhError(source, f"frame {row}: {quoted(v)} is not a number", where)
-        if len(values) != n_channels:
-            short = len(line) <= _LINE_BYTES_A_VALUE * (n_channels + 1)  # counted at once
-            count = len(line.split()) if short else f"more than {n_channels}"
-            raise BvhError(
-                source,
-                f"frame {row} has {count} values, the hierarchy declares {n_channels} channels",
-                where,
-            )
-        if not all(math.isfinite(float(v)) for v in values):
-            raise BvhError(source, f"frame {row} holds NaN or infinity", where)
-        row += 1
-    if row < frames:
-        raise BvhError(
-            source,
-            f"file ends after {row} of the {frames} frames 'Frames:' declares (truncated?)",
-            first_line + last if last >= 0 else first_line - 1,
-        )
-    raise BvhError(source, "motion data could not be read", first_line)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from samba.body import Take, forward_kinematics, resample_times, sample_linear, sample_rotations
+from samba.body import Take, resample_times
 from samba.db import frame_count_problem, frame_rate_problem
 from samba.ingest.bvh import parse_bvh
 from samba.ingest.errors import BvhError
@@ -86,34 +86,19 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
     path = Path(path)
     source = str(path)
     data = read_input(path, options.max_file_bytes, BvhError)
-    bvh = parse_bvh(data, source=source)
+
+    def sample(n_frames: int, source_fps: float) -> np.ndarray:
+        try:
+            return _source_times(n_frames, source_fps, options, source) + options.skip_frames
+        except BvhError:  # raised again below, once the file is read
+            return np.zeros(0)
+
+    bvh = parse_bvh(data, source=source, sample=sample)
     rig, joints = map_rig(bvh.names, source, bvh.skeleton, options.rig)
-    if options.skip_frames >= bvh.n_frames:
-        raise BvhError(
-            source, f"--skip-frames {options.skip_frames} drops all {bvh.n_frames} frames"
-        )
-    subset = bvh.ancestry(joints)
     fps = options.fps or bvh.fps
-    frames_out = int((bvh.n_frames - 1 - options.skip_frames) * fps / bvh.fps) + 1
-    problem = frame_count_problem(frames_out)
-    if problem:
-        raise BvhError(source, f"read at {fps:g} fps: {problem}")
-    times = resample_times(bvh.n_frames - options.skip_frames, bvh.fps, fps)
-    lo = np.floor(times + 1e-9).astype(np.int64)
-    frac = np.clip(times - lo, 0.0, 1.0)
-    last = bvh.n_frames - 1 - options.skip_frames
-    # only the source frames the output needs: each sample's frame, and the next one
-    # where it interpolates
-    needed = np.unique(np.concatenate([lo, np.minimum(lo[frac > 1e-9] + 1, last)]))
-    parents, rotations, translations = bvh.local_transforms(subset, needed + options.skip_frames)
-    local_times = np.searchsorted(needed, lo) + frac
+    times = _source_times(bvh.n_frames, bvh.fps, options, source)
     with np.errstate(over="ignore", invalid="ignore"):
-        world = forward_kinematics(
-            parents,
-            sample_rotations(rotations, local_times),
-            sample_linear(translations, local_times),
-        )
-    positions = world[:, [subset.index(j) for j in joints]]
+        positions = bvh.sampled_positions(joints, times + options.skip_frames)
     reach = float(np.abs(positions).max())
     if not reach < _MAX_REACH:  # also catches NaN from overflowing values
         raise BvhError(
@@ -179,3 +164,19 @@ def load_bvh_take(path: str | Path, options: BvhImportOptions | None = None) -> 
             "floor_tilt_deg": f"{tilt:.2f}",
         },
     )
+
+
+def _source_times(
+    n_frames: int, source_fps: float, options: BvhImportOptions, source: str
+) -> np.ndarray:
+    """The fractional frames (m,) after `options.skip_frames` of a file of `n_frames`
+    frames at `source_fps` that its take samples (at `options.fps`); raises `BvhError`
+    naming `source` when they are none or too many."""
+    if options.skip_frames >= n_frames:
+        raise BvhError(source, f"--skip-frames {options.skip_frames} drops all {n_frames} frames")
+    fps = options.fps or source_fps
+    frames_out = int((n_frames - 1 - options.skip_frames) * fps / source_fps) + 1
+    problem = frame_count_problem(frames_out)
+    if problem:
+        raise BvhError(source, f"read at {fps:g} fps: {problem}")
+    return resample_times(n_frames - options.skip_frames, source_fps, fps)

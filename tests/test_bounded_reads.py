@@ -17,8 +17,10 @@ from bvh_fixtures import humanoid_bvh
 from take_file_fixtures import pose_message, walk_poses, walk_take_file, write_take_file
 
 import samba.ingest.batch as batch_module
+import samba.ingest.input_files as input_files
 from samba.cli import main
 from samba.db.store import PoseStore
+from samba.ingest.errors import BvhError
 
 TIMEOUT = 300.0
 """Seconds the import subprocess may take on a loaded machine; never a pass/fail time (a
@@ -101,6 +103,32 @@ def test_a_file_over_the_size_limit_is_refused_before_it_is_read(
     )
     code, out, _ = run(capsys, *argv, "--max-file-mb", "1")
     assert code == 0 and "1 added, 1 already stored, 0 failed" in out
+
+
+@pytest.mark.parametrize(("grown", "limit", "refused"), [(1000, 4000, False), (5000, 4000, True)])
+def test_a_file_that_grows_while_it_is_read_is_read_whole_or_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, grown: int, limit: int, refused: bool
+) -> None:
+    path = tmp_path / "growing.bvh"
+    path.write_bytes(b"x" * 2000)
+    real_fstat = os.fstat
+    sizes = []
+
+    def fstat_then_grow(fd: int) -> os.stat_result:
+        info = real_fstat(fd)
+        sizes.append(info.st_size)
+        if len(sizes) == 2:  # after the size check, before the read
+            with path.open("ab") as out:
+                out.write(b"y" * grown)
+        return info
+
+    monkeypatch.setattr(input_files.os, "fstat", fstat_then_grow)
+    if refused:
+        with pytest.raises(BvhError, match=r"growing.bvh: .* over the limit of 0.004 MB a file"):
+            input_files.read_input(path, limit, BvhError)
+    else:
+        assert input_files.read_input(path, limit, BvhError) == b"x" * 2000 + b"y" * grown
+    assert sizes == [2000, 2000]
 
 
 def test_a_hierarchy_deeper_than_the_limit_fails_alone(

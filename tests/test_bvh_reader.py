@@ -1,5 +1,5 @@
 """The BVH motion reader's compiled kernel (`samba.ingest.kernels.motion_table_kernel`,
-through `samba.ingest.bvh._read_table`) reads the same float64 bits as its reference,
+through `samba.ingest.motion_table.read_table`) reads the same float64 bits as its reference,
 `np.loadtxt`, on every shared CMU file and on crafted text; what it cannot read goes to
 `np.loadtxt` and the diagnosis, which still name the offending line."""
 
@@ -11,10 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import samba.ingest.bvh as bvh_module
+import samba.ingest.motion_table as motion_table
 from samba.base import kernels_enabled
-from samba.ingest.bvh import _read_table, parse_bvh
+from samba.body import resample_times
+from samba.ingest.bvh import SampleTimes, parse_bvh
 from samba.ingest.errors import BvhError
+from samba.ingest.motion_table import read_table
 
 pytestmark = pytest.mark.skipif(
     not kernels_enabled(), reason="numba kernels are off (SAMBA_KERNELS=numpy or no numba)"
@@ -42,7 +44,7 @@ def loadtxt(text: bytes) -> np.ndarray:
 
 def kernel(text: bytes, frames: int, columns: int) -> np.ndarray | None:
     """The kernel's table of `text`, or None where it leaves the text to `np.loadtxt`."""
-    return _read_table(np.frombuffer(text, dtype=np.uint8), frames, columns)
+    return read_table(np.frombuffer(text, dtype=np.uint8), frames, columns)
 
 
 def assert_same_bits(got: np.ndarray, want: np.ndarray) -> None:
@@ -63,7 +65,7 @@ def test_every_shared_cmu_file_reads_as_loadtxt_reads_it(
     def no_fallback(body: str) -> None:
         raise AssertionError("the kernel gave the file up to np.loadtxt")
 
-    monkeypatch.setattr(bvh_module, "_read_numbers", no_fallback)
+    monkeypatch.setattr(motion_table, "_read_numbers", no_fallback)
     for path in cmu_files:
         data = path.read_bytes()
         want = loadtxt(motion_body(data))
@@ -177,16 +179,13 @@ def test_what_is_no_plain_number_is_left_to_loadtxt(text: bytes) -> None:
         (b"1 2 3\n4 5\n", 2),  # a short row
         (b"1 2 3 4\n4 5 6\n", 2),  # a long row
         (b"1 2 3\n4 5 6\n7 8 9\n", 2),  # more rows than frames
+        (b"1 2 3\n", 2),  # fewer rows than frames
     ],
 )
 def test_rows_of_the_wrong_length_or_too_many_are_left_to_the_diagnosis(
     text: bytes, frames: int
 ) -> None:
     assert kernel(text, frames, 3) is None
-
-
-def test_fewer_rows_than_frames_read_as_they_are() -> None:
-    assert kernel(b"1 2 3\n", 2, 3).shape == (1, 3)  # the caller's shape check diagnoses it
 
 
 def frames_text(rows: list[str], line_end: str = "\n") -> str:
@@ -272,3 +271,57 @@ def test_an_offset_beyond_10_km_in_millimetres_is_named_with_its_line(value: str
     )
     with pytest.raises(BvhError, match=r":8: OFFSET of hips_end: .* is out of range"):
         parse_bvh(text)
+
+
+def sample_every(step: float) -> SampleTimes:
+    """A `parse_bvh` sample of every `step`-th frame (fractional steps interpolate)."""
+    return lambda frames, fps: np.arange(0.0, frames - 1, step)
+
+
+def test_a_file_read_for_some_frames_holds_their_rows_as_read_whole(
+    cmu_files: list[Path],
+) -> None:
+    for path in cmu_files[::7]:
+        data = path.read_bytes()
+        whole = parse_bvh(data, source=str(path))
+        some = parse_bvh(data, source=str(path), sample=sample_every(3.7))
+        assert some.n_frames == whole.n_frames
+        assert some.held[0] == 0 and len(some.held) < whole.n_frames / 1.8
+        assert_same_bits(some.motion, whole.motion[some.held])
+
+
+@pytest.mark.parametrize(
+    ("bad_row", "problem"),
+    [
+        ("1 2", "frame 41 has 2 values, the hierarchy declares 3 channels"),
+        ("1 2 3 4", "frame 41 has 4 values, the hierarchy declares 3 channels"),
+        ("1 2 zero", "frame 41: 'zero' is not a number"),
+        ("1 nan 3", "frame 41 holds NaN or infinity"),
+    ],
+)
+def test_a_bad_row_among_the_frames_not_converted_is_named_by_its_line(
+    bad_row: str, problem: str
+) -> None:
+    rows = [f"{i} {i}.5 -{i}e-3" for i in range(80)]
+    rows[41] = bad_row
+    some = sample_every(4.0)  # frames 0, 4, ..., 40, 44: 41 is only checked
+    with pytest.raises(BvhError) as info:
+        parse_bvh(frames_text(rows).encode(), source="bad.bvh", sample=some)
+    assert info.value.problem == problem
+    assert info.value.line == HEADER.count("\n") + 3 + 41
+
+
+@pytest.mark.parametrize("fps", [30.0, 24.0, 7.5])
+def test_compiled_positions_agree_with_the_numpy_path_to_1e_9_m(
+    cmu_files: list[Path], monkeypatch: pytest.MonkeyPatch, fps: float
+) -> None:
+    for path in cmu_files[::6]:  # the three rigs, position channels on their roots
+        bvh = parse_bvh(path.read_bytes(), source=str(path))
+        joints = list(range(0, len(bvh.joints), 2))
+        times = resample_times(bvh.n_frames, bvh.fps, fps)
+        compiled = bvh.sampled_positions(joints, times)
+        with monkeypatch.context() as numpy_only:
+            numpy_only.setenv("SAMBA_KERNELS", "numpy")
+            reference = bvh.sampled_positions(joints, times)
+        # file units (centimetres, inches): 1e-9 of them is under 1e-9 m
+        np.testing.assert_allclose(compiled, reference, rtol=0, atol=1e-9)
