@@ -8,8 +8,9 @@ baseline measured in the same run:
 
 * import: `np.loadtxt` of the files' motion sections alone (the cost of reading the
   numbers, before any mapping, kinematics or normalisation), beside the BVH reader's
-  compiled kernel on the same sections, whole-file parsing, conversion to takes and
-  `samba db import` itself; the stages alternate round by round;
+  compiled kernel on the same sections, whole-file parsing (every frame, and only the
+  frames a 30 fps take samples), conversion to takes and `samba db import` itself; the
+  stages alternate round by round;
 * queries: a plain scipy k-d tree over the raw 24-D aligned marker features.
 
 Exact queries are timed through the tree and, up to 200,000 poses, by the scan that
@@ -43,6 +44,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 from text_table import print_table  # noqa: E402
 
+from samba.body import resample_times  # noqa: E402
 from samba.body.alignment import align_markers  # noqa: E402
 from samba.body.perturb import perturb_joint_angles  # noqa: E402
 from samba.body.skeleton import N_MARKERS, markers_of  # noqa: E402
@@ -100,6 +102,11 @@ def best_of_rounds(repeats: int, stages: dict[str, Callable[[], object]]) -> dic
     return best
 
 
+def at_30_fps(frames: int, fps: float) -> np.ndarray:
+    """The frames a take read at 30 fps samples of a file of `frames` at `fps`."""
+    return resample_times(frames, fps, 30.0)
+
+
 def bench_import(files: list[Path], repeats: int = 3) -> np.ndarray:
     """Import throughput, each stage the best of `repeats` alternating rounds, against
     `np.loadtxt` of the same files' numbers in the same run; returns the real poses."""
@@ -120,6 +127,10 @@ def bench_import(files: list[Path], repeats: int = 3) -> np.ndarray:
         for f in files:
             parse_bvh(f.read_bytes(), source=str(f))
 
+    def parse_sampled() -> None:
+        for f in files:
+            parse_bvh(f.read_bytes(), source=str(f), sample=at_30_fps)
+
     def import_all() -> None:
         results = import_paths(next(empty_stores), files, progress=False)
         assert all(r.status == "added" for r in results)
@@ -131,6 +142,7 @@ def bench_import(files: list[Path], repeats: int = 3) -> np.ndarray:
         "baseline: np.loadtxt of the motion sections": loadtxt_numbers,
         "motion reader (compiled kernel) of the same": reader_numbers,
         "parse_bvh: whole files (hierarchy + motion)": parse_files,
+        "parse_bvh: the frames a 30 fps take samples": parse_sampled,
         "read + map + FK + resample + normalise": lambda: [load_bvh_take(f) for f in files],
         "samba db import (group commits + index)": import_all,
     }

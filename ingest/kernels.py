@@ -5,9 +5,9 @@
 | `motion_table_kernel` | `np.loadtxt` (`samba.ingest.motion_table._read_numbers`) |
 | `sampled_positions_kernel` | `samba.ingest.bvh.BvhFile.sampled_positions` with kernels off |
 
-`np.loadtxt` reads the motion section of the 49 shared CMU files (85 MB of text) in 0.4 to
+`np.loadtxt` reads the motion section of the 49 shared CMU files (85 MB of text) in 0.46 to
 1.6 s on one core, depending on the machine; this kernel tokenizes and converts the same
-bytes in one pass, in 0.24 to 0.3 s, to the same float64 bits (`tests/test_bvh_reader.py`).
+bytes in one pass, in 0.17 to 0.3 s, to the same float64 bits (`tests/test_bvh_reader.py`).
 It accepts only plain decimal numbers (`[+-]digits[.digits][e[+-]digits]`) separated by
 spaces, tabs and line ends; anything else (NaN, infinity, a word, a comment, a byte that
 is not ASCII) makes it give up, and the reader falls back to `np.loadtxt` and its
