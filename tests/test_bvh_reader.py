@@ -288,6 +288,13 @@ def test_a_file_read_for_some_frames_holds_their_rows_as_read_whole(
         assert some.n_frames == whole.n_frames
         assert some.held[0] == 0 and len(some.held) < whole.n_frames / 1.8
         assert_same_bits(some.motion, whole.motion[some.held])
+        times = np.arange(0.0, whole.n_frames - 1, 3.7)
+        joints = [0, len(whole.joints) - 1]
+        assert_same_bits(
+            some.sampled_positions(joints, times), whole.sampled_positions(joints, times)
+        )
+        with pytest.raises(ValueError, match="frame 2 was not read"):
+            some.sampled_positions(joints, np.array([2.0]))
 
 
 @pytest.mark.parametrize(
