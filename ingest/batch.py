@@ -30,8 +30,8 @@ times what the scheduler spends on a task. The files of a task are chosen by siz
 reading time grows with it), so that the tasks have similar work."""
 READERS = 2
 """Threads that read files ahead of the commits in an import without a cluster: the BVH
-reader's kernel, the file reads and the hashing run outside the GIL (the 49 shared CMU
-files read in 0.34 s rather than 0.52 s on two cores, 2026-12-06)."""
+reader's kernels, the file reads and the hashing run outside the GIL (the 49 shared CMU
+files read in 0.15-0.20 s rather than 0.26-0.29 s one by one on two cores, 2026-12-06)."""
 COMMIT_FILES = 64
 """Most files whose takes `import_paths` commits together."""
 COMMIT_SECONDS = 1.0

@@ -43,7 +43,7 @@ def affine_of(
     mean = weights @ samples
     weight = alpha * mask + betas
     if variance_kept >= 1.0:
-        cov = (samples.T * weights) @ samples - np.outer(mean, mean)
+        cov = _covariance(samples, weights, mean)
         for i in range(d):
             cov[i, i] += variance_floor
         system = cov * weight
@@ -89,12 +89,17 @@ def _principal_axes(
     if shoulder_placed:
         free = _shoulder_free(samples)
         free_mean = weights @ free
-        free_cov = (free.T * weights) @ free - np.outer(free_mean, free_mean)
-        variances, free_vectors = np.linalg.eigh(free_cov)
+        variances, free_vectors = np.linalg.eigh(_covariance(free, weights, free_mean))
         return variances, _from_shoulder_free(free_vectors)
-    cov = (samples.T * weights) @ samples - np.outer(mean, mean)
-    variances, vectors = np.linalg.eigh(cov)
+    variances, vectors = np.linalg.eigh(_covariance(samples, weights, mean))
     return variances, np.ascontiguousarray(vectors)
+
+
+@compiled
+def _covariance(samples: np.ndarray, weights: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """The covariance (D, D) of samples (M, D) with weights (M,) summing to 1 about their
+    weighted `mean` (D,), in the samples' unit squared."""
+    return (samples.T * weights) @ samples - np.outer(mean, mean)
 
 
 @compiled
